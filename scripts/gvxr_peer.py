@@ -11,19 +11,29 @@ For view angle theta we move the source and detector instead of rotating the obj
     right vector u  = R_z(theta) @ (1, 0, 0)          -> gvxr.setDetectorRightVector
     point source (cone beam), detector (ncol, nrow) pixels of pixel_mm x pixel_mm.
 
-gvxr.computeLBuffer(label) returns a (nrow, ncol) image whose row index increases
-along -v (row 0 is the TOP of the detector) and whose column index increases along +u;
-its unit is cm, whatever units were used for the input. We therefore return
-``10 * lbuffer[::-1, :]`` so that element [r, c] is the path length in mm along the ray
-from the source to our pixel centre  det_centre + (c-(ncol-1)/2)*pixel*u + (r-(nrow-1)/2)*pixel*v.
-(Verified against an exact float64 slab ray/box computation: ``python3 scripts/gvxr_peer.py``.)
+gvxr.computeLBuffer(label) returns a (nrow, ncol) image (a tuple of tuples) whose row index
+increases along +v and column index along +u, with pixel centres exactly at our pixel
+centres, so no flip/transpose is needed; its unit is cm whatever unit the mesh was given in
+(checked: mm/cm/um meshes give the same values).  We return ``10 * lbuffer`` so that [r, c]
+is the path length in mm along the ray from the source to our pixel centre
+det_centre + (c-(ncol-1)/2)*pixel*u + (r-(nrow-1)/2)*pixel*v.  Self-check against an exact
+float64 slab ray/box computation: ``python3 scripts/gvxr_peer.py``.  With a near source
+gvxr's error grows with triangle size (it interpolates the depth across each triangle in
+screen space: ~0.2 mm max on a 12-triangle 10 mm cube at SOD=100, <1e-3 mm once subdivided);
+with a far source it is ~1e-4 mm (float32).
+
+All meshes of one material are concatenated into one gvxr mesh (an L-buffer sums over closed
+surfaces, so this equals the sum of per-mesh L-buffers; overlapping meshes count twice).
+The scene is re-uploaded only when the meshes passed change (content fingerprint).
 
 gvxr keeps one OpenGL context (EGL, headless) per process; it is created lazily on first
-use and reused for every call, and destroyed (quietly) at exit.  gvxr's C++ logging (it
-writes a lot to stdout/stderr) is silenced by redirecting file descriptors 1 and 2 to
-/dev/null around gvxr calls.  gvxr assumes its context stays current, which breaks (segfault)
-once another EGL context (e.g. moderngl standalone) has been made current in this thread; so
-every call makes gvxr's EGL context current first and restores the caller's context after.
+use (importing gvxr takes ~4 s) and reused for every call, and destroyed at exit.  gvxr's
+logger is sent to /dev/null (gvxr.useLogFile), and the stray stdout/stderr lines of its
+windowing fall-back are silenced by redirecting fds 1 and 2 to /dev/null around gvxr calls.
+gvxr assumes its context stays current: a gvxr call after another EGL context (e.g. a
+moderngl standalone one) was made current in the thread segfaults.  So every call makes
+gvxr's EGL context current first and restores the caller's current context afterwards
+(gvxr must be used from one thread only).
 """
 from __future__ import annotations
 
@@ -81,6 +91,14 @@ def _current(lib):
             lib.eglGetCurrentSurface(_EGL_READ), lib.eglGetCurrentContext())
 
 
+def _make_current(state):
+    """Make (display, draw, read, context) current through whichever libEGL accepts it."""
+    lib, mine = _egl
+    if state[3] is None:                 # nothing was current: release gvxr's context
+        return lib.eglMakeCurrent(mine[0], None, None, None)
+    return any(l is not None and l.eglMakeCurrent(*state) for l in (_sys_egl, lib))
+
+
 @contextlib.contextmanager
 def _gvxr_context():
     """Make gvxr's EGL context current; afterwards restore whatever was current before.
@@ -88,7 +106,7 @@ def _gvxr_context():
     gvxr ships its own copy of libEGL (gvxr.libs/libEGL-*.so); both copies report the same
     current context, but each only accepts the EGLDisplays it created itself, so the
     previous context is restored through whichever copy accepts it."""
-    if _egl is None or not _egl[1][3]:
+    if _egl is None or _egl[1][3] is None:
         yield
         return
     lib, mine = _egl
@@ -99,11 +117,8 @@ def _gvxr_context():
     try:
         yield
     finally:
-        if switch:
-            if prev[3] is None:  # nothing was current: release gvxr's context
-                lib.eglMakeCurrent(mine[0], None, None, None)
-            elif not any(l is not None and l.eglMakeCurrent(*prev) for l in (_sys_egl, lib)):
-                raise RuntimeError("could not restore the previous EGL context")
+        if switch and not _make_current(prev):
+            raise RuntimeError("gvxr_peer: could not restore the previous EGL context")
 
 
 def _destroy():
@@ -119,21 +134,23 @@ def _init():
         with _quiet():
             import gvxrPython3
             from gvxrPython3 import gvxr
-            libs = glob.glob(os.path.join(os.path.dirname(gvxrPython3.__file__), "..",
-                                          "gvxr.libs", "libEGL*.so*"))
-            egl = _load_egl(libs[0] if libs else "libEGL.so.1")
-            prev = _current(egl)
-            gvxr.createOpenGLContext()       # hidden EGL context, created once per process
-            _egl = (egl, _current(egl))
+            gvxr.useLogFile(os.devnull)      # gvxr's logger, otherwise on stdout (even at exit)
             try:
+                libs = glob.glob(os.path.join(os.path.dirname(gvxrPython3.__file__), "..",
+                                              "gvxr.libs", "libEGL*.so*"))
+                egl = _load_egl(libs[0] if libs else "libEGL.so.1")
                 _sys_egl = _load_egl("libEGL.so.1")
             except OSError:
-                pass
+                egl = None
+            prev = _current(egl) if egl else None
+            gvxr.createOpenGLContext()       # hidden EGL context, created once per process
+            if egl:
+                _egl = (egl, _current(egl))
             gvxr.usePointSource()            # cone beam
-            gvxr.setMonoChromatic(0.08, "MeV", 1000)  # required, otherwise computeLBuffer returns ()
-            gvxr.disableArtefactFiltering()  # raw L-buffer (default is GPU artefact filtering)
-            if prev[3] is not None:           # give the caller its context back
-                (_sys_egl and _sys_egl.eglMakeCurrent(*prev)) or egl.eglMakeCurrent(*prev)
+            gvxr.setMonoChromatic(0.08, "MeV", 1000)  # required, else computeLBuffer returns ()
+            gvxr.disableArtefactFiltering()  # raw L-buffer (no effect on L-buffers seen here)
+            if _egl and _egl[1][3] is not None and prev[3] is not None:
+                _make_current(prev)          # give the caller its context back
         _gvxr = gvxr
         atexit.register(_destroy)
     except Exception as exc:  # ImportError (missing libxcb-*), no EGL, ...
@@ -180,8 +197,10 @@ def _upload(meshes_by_material):
     _scene_key = key
 
 
-def gvxr_path_lengths(meshes_by_material, sod_mm, sdd_mm, shape, pixel_mm,
-                      angle_rad=0.0, repeats=3):
+def gvxr_path_lengths(meshes_by_material: dict[str, list[tuple[np.ndarray, np.ndarray]]],
+                      sod_mm: float, sdd_mm: float, shape: tuple[int, int], pixel_mm: float,
+                      angle_rad: float = 0.0, repeats: int = 3
+                      ) -> tuple[dict[str, np.ndarray], float]:
     """Path length through each material's meshes for one cone-beam view, computed by gvxr.
 
     meshes_by_material: {material: [(vertices (n,3) mm, faces (m,3) int), ...]} in our frame.
@@ -191,9 +210,9 @@ def gvxr_path_lengths(meshes_by_material, sod_mm, sdd_mm, shape, pixel_mm,
     (see module docstring).  ``seconds`` is the best, over ``repeats`` timed renders run after
     one untimed warm-up, of the wall time to: set the view's source/detector position and
     orientation, and, for every material, gvxr.computeLBuffer (GPU render + readback into a
-    Python tuple) followed by conversion to a float64 numpy array, cm->mm scaling and row flip.
-    Not timed: context creation, mesh upload (done once while the same meshes are passed),
-    detector resolution set-up.
+    Python tuple) followed by conversion to a float64 numpy array and cm->mm scaling.
+    Not timed: gvxr import and context creation, mesh fingerprint and upload (skipped while
+    the same meshes are passed), detector resolution/pixel-size set-up, EGL context switch.
     """
     _init()
     if _init_error is not None:
@@ -227,3 +246,48 @@ def gvxr_path_lengths(meshes_by_material, sod_mm, sdd_mm, shape, pixel_mm,
     for mat in meshes_by_material:              # materials with no meshes -> zeros
         out.setdefault(mat, np.zeros((nrow, ncol)))
     return out, best
+
+
+def _box(centre, size):
+    """Closed, outward-CCW triangulated axis-aligned cube (for the self-check)."""
+    v = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
+    f = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
+                  [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
+    return v * size / 2 + np.asarray(centre, float), f
+
+
+def _exact_box_lengths(boxes, sod, sdd, shape, pixel, angle):
+    """Exact float64 path length through disjoint axis-aligned boxes (slab method), our frame."""
+    c, s = np.cos(angle), np.sin(angle)
+    rot = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+    src, det, u = rot @ (0, -sod, 0), rot @ (0, sdd - sod, 0), rot @ (1, 0, 0)
+    r, col = np.mgrid[:shape[0], :shape[1]]
+    d = (det + ((col - (shape[1] - 1) / 2) * pixel)[..., None] * u
+         + ((r - (shape[0] - 1) / 2) * pixel)[..., None] * np.array([0, 0, 1.0])) - src
+    total = np.zeros(shape)
+    for centre, size in boxes:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t1 = (np.asarray(centre) - size / 2 - src) / d
+            t2 = (np.asarray(centre) + size / 2 - src) / d
+        t0 = np.nanmax(np.minimum(t1, t2), axis=-1)
+        t3 = np.nanmin(np.maximum(t1, t2), axis=-1)
+        total += np.clip(t3 - t0, 0, None) * np.linalg.norm(d, axis=-1)
+    return total
+
+
+if __name__ == "__main__":  # orientation / unit self-check against exact ray-box lengths
+    reason = gvxr_available()
+    if reason:
+        sys.exit(f"gvxr unavailable: {reason}")
+    boxes = {"a": [((5.0, 0.0, 8.0), 10.0), ((-6.0, 3.0, -5.0), 4.0)],  # two meshes, one material
+             "b": [((-4.0, -2.0, 4.0), 3.0)]}
+    meshes = {m: [_box(*b) for b in bs] for m, bs in boxes.items()}
+    shape, pixel = (128, 96), 0.2
+    for sod, sdd in ((100.0, 200.0), (10000.0, 10100.0)):
+        for angle in (0.0, 0.7):
+            out, sec = gvxr_path_lengths(meshes, sod, sdd, shape, pixel, angle)
+            for m, bs in boxes.items():
+                err = np.abs(out[m] - _exact_box_lengths(bs, sod, sdd, shape, pixel, angle))
+                print(f"SOD={sod:g} SDD={sdd:g} angle={angle} material={m}: "
+                      f"max|err|={err.max():.3g} mm mean|err|={err.mean():.3g} mm "
+                      f"({sec * 1e3:.1f} ms/view)")

@@ -91,3 +91,21 @@ def random_rotation(rng) -> np.ndarray:
             [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
         ]
     )
+
+
+def convex_chord(origins, dirs, vertices, faces):
+    """Exact chord of a convex polyhedron (intersection of its face half-spaces), float64."""
+    a, b, c = (np.asarray(vertices, dtype=np.float64)[np.asarray(faces)[:, k]] for k in range(3))
+    normals = np.cross(b - a, c - a)
+    offsets = np.einsum("ij,ij->i", normals, a)
+    enter = np.zeros(origins.shape[:-1])
+    leave = np.full(origins.shape[:-1], np.inf)
+    for n, h in zip(normals, offsets):
+        nd = dirs @ n
+        dist = h - origins @ n
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = dist / nd
+        enter = np.where(nd < 0, np.maximum(enter, t), enter)
+        leave = np.where(nd > 0, np.minimum(leave, t), leave)
+        leave = np.where((nd == 0) & (dist < 0), -np.inf, leave)
+    return np.maximum(leave - enter, 0.0)

@@ -119,22 +119,20 @@ def _merge_duplicate_vertices(vertices: np.ndarray, faces: np.ndarray) -> tuple[
 
 def _check_closed(vertices: np.ndarray, faces: np.ndarray, name: str) -> np.ndarray:
     """Every directed edge must be matched by its reverse; fix inconsistent winding if that is all."""
-    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-    _, counts = np.unique(edges, axis=0, return_counts=True)
-    odd = int(np.count_nonzero(counts % 2))
+    odd, unmatched = _edge_balance(faces)
     if odd:
         raise MeshError(
             f"object {name!r} is not watertight: {odd} open edges (edges used by an odd number of "
             "triangles). Close the holes (e.g. trimesh.repair.fill_holes, or export a closed solid) and retry."
         )
-    if _unmatched_directed_edges(faces) == 0:
+    if unmatched == 0:
         return faces
     import trimesh
 
     mesh = trimesh.Trimesh(vertices, faces, process=False)
     trimesh.repair.fix_winding(mesh)
     fixed = np.asarray(mesh.faces, dtype=np.int64)
-    left = _unmatched_directed_edges(fixed)
+    left = _edge_balance(fixed)[1]
     if left:
         raise MeshError(
             f"object {name!r}: triangle winding is inconsistent and could not be repaired "
@@ -144,10 +142,12 @@ def _check_closed(vertices: np.ndarray, faces: np.ndarray, name: str) -> np.ndar
     return fixed
 
 
-def _unmatched_directed_edges(faces: np.ndarray) -> int:
-    directed = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    key = np.sort(directed, axis=1)
-    sign = np.where(directed[:, 0] < directed[:, 1], 1, -1)
-    uniq, inverse = np.unique(key, axis=0, return_inverse=True)
-    balance = np.bincount(inverse.reshape(-1), weights=sign, minlength=len(uniq))
-    return int(np.count_nonzero(balance))
+def _edge_balance(faces: np.ndarray) -> tuple[int, int]:
+    """(edges used an odd number of times, edges whose two directions are not used equally often)."""
+    start = faces.ravel()
+    end = faces[:, [1, 2, 0]].ravel()
+    lo, hi = np.minimum(start, end), np.maximum(start, end)
+    key = lo * (int(faces.max()) + 1) + hi  # one int64 per undirected edge: fast 1-D unique
+    _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
+    balance = np.bincount(inverse, weights=np.where(start < end, 1.0, -1.0), minlength=len(counts))
+    return int(np.count_nonzero(counts % 2)), int(np.count_nonzero(balance))

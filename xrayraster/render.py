@@ -103,8 +103,8 @@ class Renderer:
         view %= self._vec.num_views
         buffers = self._upload(scene)
         method = self._choose_method(scene)
+        skip = self._objects_behind_source(buffers, view)
         rays = view_rays(self._render_vec, view, buffers.ref)
-        skip = self._objects_behind_source(buffers, rays, view)
         if method == "sum":
             out = self._render_sum(buffers, rays, skip)
         else:
@@ -210,23 +210,31 @@ class Renderer:
         self.last_method = method
         return method
 
-    def _objects_behind_source(self, buffers: _SceneBuffers, rays, view: int) -> set:
-        """Objects wholly behind a cone-beam source are skipped; one that straddles it is refused."""
+    def _objects_behind_source(self, buffers: _SceneBuffers, view: int) -> set:
+        """Indices (draw order) of objects wholly behind a cone-beam source, which no ray reaches.
+
+        An object that straddles the source plane is refused: its path lengths are undefined.
+        """
         if self._vec.beam != "cone":
             return set()
-        depth = rays.world_to_pixel[2]
-        if np.all(buffers.corners @ depth[:3] + depth[3] > 0):
+        src, det, u, v = np.split(self._vec.array[view], 4)
+        normal = np.cross(u, v)
+        normal *= np.sign(normal @ (det - src))
+        offset = (buffers.ref - src) @ normal  # depth of X is (X - ref)·normal + offset
+        if np.all(buffers.corners @ normal + offset > 0):
             return set()
         skip = set()
         for index, o in enumerate(buffers.objects):
-            h = (o.mesh.vertices - buffers.ref) @ depth[:3] + depth[3]
-            if np.all(h <= 0):
+            depth = (o.mesh.vertices - buffers.ref) @ normal + offset
+            if np.all(depth <= 0):
                 skip.add(index)
-            elif np.any(h <= 0):
+            elif np.any(depth <= 0):
                 raise SceneError(
                     f"object {o.name!r} crosses the source plane in view {view}: the source would sit inside "
                     "or beside it. Move the object or the source (source_to_origin) so the object is in front of it."
                 )
+        if len(skip) < len(buffers.objects) and np.allclose(buffers.ref, src, rtol=0, atol=1e-9 * (1 + np.abs(src).max())):
+            raise SceneError(f"view {view}: the source sits at the centre of the scene's bounding box; move it")
         return skip
 
     def _set_view_uniforms(self, prog: moderngl.Program, rays) -> None:

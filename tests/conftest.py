@@ -1,0 +1,44 @@
+"""Shared fixtures. Capabilities (EGL/OSMesa) are probed once; a missing one skips with the reason,
+unless XRAYRASTER_REQUIRE_GL=1 (set by .ci/run), which turns that skip into a failure."""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))  # tests/reference.py
+
+
+def _require(capability: str, reason: str) -> None:
+    if os.environ.get(f"XRAYRASTER_REQUIRE_{capability}") == "1":
+        pytest.fail(f"{capability} is required here (XRAYRASTER_REQUIRE_{capability}=1) but unavailable: {reason}")
+    pytest.skip(reason)
+
+
+@pytest.fixture(scope="session")
+def gl():
+    from xrayraster import GLContext, GLContextError
+
+    try:
+        ctx = GLContext()
+    except GLContextError as exc:
+        _require("GL", str(exc))
+    yield ctx
+    ctx.release()
+
+
+@pytest.fixture
+def render(gl):
+    """render(geometry, scene, view=0, **options) -> (materials, rows, cols) on the shared context."""
+    from xrayraster import Renderer
+
+    def _render(geometry, scene, view=0, **options):
+        with Renderer(geometry, context=gl, **options) as r:
+            out = r.path_lengths(scene, view)
+            _render.method = r.last_method
+            return out
+
+    return _render
