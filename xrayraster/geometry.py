@@ -71,7 +71,7 @@ def _shape(name: str, value, ndim: int) -> tuple[int, ...]:
         raise GeometryError(f"{name} must have {ndim} entries, got {value!r}")
     out = []
     for i, n in enumerate(value):
-        if int(n) != n or n < 1:
+        if not np.isfinite(n) or int(n) != n or n < 1:
             raise GeometryError(f"{name}[{i}] must be a positive integer, got {n!r}")
         out.append(int(n))
     return tuple(out)
@@ -247,8 +247,9 @@ class VectorGeometry(_ScanGeometry):
         if np.any(np.linalg.norm(normal, axis=1) <= 1e-12 * np.linalg.norm(u, axis=1) * np.linalg.norm(v, axis=1)):
             raise GeometryError("vectors: detector u and v must be non-zero and not parallel")
         if self.beam == "cone":
+            # Relative tolerance: a source in the plane up to rounding is still in the plane.
             height = np.einsum("ij,ij->i", normal, d - s) / np.linalg.norm(normal, axis=1)
-            if np.any(np.abs(height) <= 0):
+            if np.any(np.abs(height) <= 1e-9 * np.linalg.norm(d - s, axis=1)):
                 raise GeometryError("vectors: the source lies in the detector plane")
         elif np.any(np.abs(np.einsum("ij,ij->i", normal, s)) <= 1e-9 * np.linalg.norm(s, axis=1) * np.linalg.norm(normal, axis=1)):
             raise GeometryError("vectors: the ray direction is parallel to the detector plane")

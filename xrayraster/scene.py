@@ -62,8 +62,10 @@ class Scene:
         converts mesh units to mm; ``transform`` then places the object in the scanner frame.
         """
         order = len(self._objects)
-        name = name if name is not None else f"object{order}"
-        if any(o.name == name for o in self._objects):
+        taken = {o.name for o in self._objects}
+        if name is None:
+            name = next(f"object{k}" for k in range(order, order + len(taken) + 1) if f"object{k}" not in taken)
+        if name in taken:
             raise SceneError(f"an object named {name!r} is already in the scene; names must be unique")
         try:
             hash(material)

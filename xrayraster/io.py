@@ -1,0 +1,54 @@
+"""Output files, written atomically: a reader never sees a half-written file."""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+
+def atomic_write(path, write) -> Path:
+    """Call ``write(tmp_path)`` on a temporary file beside ``path``, then rename it into place."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=path.suffix)
+    os.close(fd)
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def write_tiff(path, data: np.ndarray, *, axes: str, pixel_size_mm: tuple[float, float], info: dict) -> Path:
+    """Float32 ImageJ hyperstack (Fiji reads axes and mm scale); ``info`` goes in as JSON."""
+    import tifffile
+
+    data = np.ascontiguousarray(data, dtype=np.float32)
+    metadata = {"axes": axes, "unit": "mm", "Info": json.dumps(info, indent=1)}
+    resolution = (1.0 / pixel_size_mm[1], 1.0 / pixel_size_mm[0])
+    return atomic_write(
+        path, lambda tmp: tifffile.imwrite(tmp, data, imagej=True, metadata=metadata, resolution=resolution)
+    )
+
+
+def read_tiff_info(path) -> dict:
+    """The JSON ``info`` written by :func:`write_tiff`."""
+    import tifffile
+
+    with tifffile.TiffFile(path) as tif:
+        return json.loads(tif.imagej_metadata["Info"])
+
+
+def write_quicklook(path, image: np.ndarray) -> Path:
+    """8-bit PNG scaled from 0 to the image maximum (a quick look, not data)."""
+    from PIL import Image
+
+    peak = float(image.max())
+    scaled = np.zeros(image.shape, np.uint8) if peak <= 0 else np.round(255 * np.clip(image / peak, 0, 1)).astype(np.uint8)
+    return atomic_write(path, lambda tmp: Image.fromarray(scaled).save(tmp, format="PNG"))
