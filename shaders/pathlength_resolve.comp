@@ -4,11 +4,11 @@
 // = priority, then insertion order), and that object's material gets the length.
 
 layout(local_size_x = 8, local_size_y = 8) in;
-layout(binding = 0, r32ui) uniform coherent uimage2D u_heads;
-layout(std430, binding = 2) readonly buffer Nodes { uvec4 nodes[]; };
-layout(std430, binding = 4) readonly buffer RankChannel { uint rank_channel[]; };
-layout(std430, binding = 5) writeonly buffer Lengths { float lengths[]; };  // (channel, row, col)
-layout(std430, binding = 6) buffer Overflow { uint overflow_pixels; uint max_depth; };
+layout(std430, binding = 2) readonly buffer Objects { uvec4 objects[]; };  // channel, active, -, -
+layout(std430, binding = 4) buffer Heads { uint heads[]; };
+layout(std430, binding = 5) readonly buffer Nodes { uvec4 nodes[]; };      // t bits, object*2 + exit, next, -
+layout(std430, binding = 6) buffer Counters { uint node_count; uint overflow_pixels; uint max_depth; };
+layout(std430, binding = 7) writeonly buffer Lengths { float lengths[]; };  // (channel, row, col)
 
 uniform ivec2 u_size;  // (cols, rows)
 
@@ -22,8 +22,9 @@ float acc[NUM_CHANNELS];
 void main() {
     ivec2 px = ivec2(gl_GlobalInvocationID.xy);
     if (px.x >= u_size.x || px.y >= u_size.y) return;
-    uint node = imageLoad(u_heads, px).x;
-    imageStore(u_heads, px, uvec4(END));  // leave the list empty for the next view
+    int pixel = px.y * u_size.x + px.x;
+    uint node = heads[pixel];
+    heads[pixel] = END;  // leave the list empty for the next view
     int n = 0;
     int depth = 0;
     while (node != END) {
@@ -49,8 +50,8 @@ void main() {
     int n_active = 0;
     int owner = -1;  // index into active_* of the current owner
     for (int i = 0; i < n; i++) {
-        if (owner >= 0 && i > 0) acc[rank_channel[active_rank[owner]]] += ts[i] - ts[i - 1];
-        uint rank = metas[i] >> 1;
+        if (owner >= 0 && i > 0) acc[objects[active_rank[owner]].x] += ts[i] - ts[i - 1];
+        uint rank = metas[i] >> 1;  // object index = rank order
         int step = (metas[i] & 1u) == 1u ? -1 : 1;  // exit leaves, entry enters
         int j = 0;
         while (j < n_active && active_rank[j] != rank) j++;
@@ -61,6 +62,5 @@ void main() {
             if (active_count[q] > 0 && (owner < 0 || active_rank[q] > active_rank[owner])) owner = q;
     }
     int npix = u_size.x * u_size.y;
-    int offset = px.y * u_size.x + px.x;
-    for (int c = 0; c < NUM_CHANNELS; c++) lengths[c * npix + offset] = acc[c];
+    for (int c = 0; c < NUM_CHANNELS; c++) lengths[c * npix + pixel] = acc[c];
 }

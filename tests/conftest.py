@@ -1,5 +1,6 @@
-"""Shared fixtures. Capabilities (EGL/OSMesa) are probed once; a missing one skips with the reason,
-unless XRAYRASTER_REQUIRE_GL=1 (set by .ci/run), which turns that skip into a failure."""
+"""Shared fixtures. Capabilities (a GL driver, the OSMesa fallback) are probed once; a missing one
+skips with the reason, unless XRAYRASTER_REQUIRE_GL=1 / XRAYRASTER_REQUIRE_OSMESA=1 (set by .ci/run),
+which turn that skip into a failure."""
 
 from __future__ import annotations
 
@@ -26,6 +27,19 @@ def gl():
         ctx = GLContext()
     except GLContextError as exc:
         _require("GL", str(exc))
+    yield ctx
+    ctx.release()
+
+
+@pytest.fixture(scope="session")
+def osmesa():
+    """A context on the OSMesa fallback backend (libosmesa6)."""
+    from xrayraster import GLContext, GLContextError
+
+    try:
+        ctx = GLContext("osmesa")
+    except GLContextError as exc:
+        _require("OSMESA", str(exc))
     yield ctx
     ctx.release()
 

@@ -14,12 +14,13 @@ import ctypes
 import ctypes.util
 import os
 import re
+from contextlib import contextmanager
 from importlib import resources
 from pathlib import Path
 
 import moderngl
 
-REQUIRED_GL = 430  # SSBOs, image atomics and compute shaders
+REQUIRED_GL = 430  # SSBOs, compute shaders, indirect draws
 
 INSTALL_HINT = (
     "xrayraster needs OpenGL 4.3 through EGL or OSMesa. On Debian/Ubuntu install the drivers with "
@@ -43,6 +44,7 @@ class GLContext:
         if backend not in (None, "egl", "osmesa"):
             raise GLContextError(f"unknown GL backend {backend!r}: use 'egl' or 'osmesa' (XRAYRASTER_GL)")
         errors = []
+        self._depth = 0  # nesting of current()
         self._osmesa = None
         self.ctx = None
         for name in (backend,) if backend else ("egl", "osmesa"):
@@ -58,32 +60,54 @@ class GLContext:
             version = self.ctx.info["GL_VERSION"]
             self.release()
             raise GLContextError(f"OpenGL {version} found, 4.3 needed. " + INSTALL_HINT)
+        self.ctx.info  # queried (and cached by moderngl) now, while this context is current
         self._programs: dict[tuple, moderngl.Program | moderngl.ComputeShader] = {}
+
+    @contextmanager
+    def current(self):
+        """``with gl.current():`` makes this context current in the calling thread, and the
+        previous one again on exit. GL calls go to whichever context is current, so every
+        public entry point that touches GL state enters this: several contexts (ours, a
+        second renderer's, a peer library's) can then live in one process. Re-entrant: only
+        the outermost level switches (moderngl's own enter/exit do not nest)."""
+        if self._depth == 0:
+            self.ctx.__enter__()
+        self._depth += 1
+        try:
+            yield self
+        finally:
+            self._depth -= 1
+            if self._depth == 0:
+                self.ctx.__exit__(None, None, None)
 
     @property
     def renderer(self) -> str:
         """Driver name, e.g. 'llvmpipe (LLVM 15.0.6, 256 bits)'."""
-        return self.ctx.info["GL_RENDERER"]
+        with self.current():
+            return self.ctx.info["GL_RENDERER"]
 
     def program(self, vertex: str, fragment: str, defines: dict | None = None) -> moderngl.Program:
         key = (vertex, fragment, tuple(sorted((defines or {}).items())))
         if key not in self._programs:
-            self._programs[key] = self.ctx.program(
-                vertex_shader=shader_source(vertex, defines), fragment_shader=shader_source(fragment, defines)
-            )
+            with self.current():
+                self._programs[key] = self.ctx.program(
+                    vertex_shader=shader_source(vertex, defines), fragment_shader=shader_source(fragment, defines)
+                )
         return self._programs[key]
 
     def compute(self, name: str, defines: dict | None = None) -> moderngl.ComputeShader:
         key = (name, tuple(sorted((defines or {}).items())))
         if key not in self._programs:
-            self._programs[key] = self.ctx.compute_shader(shader_source(name, defines))
+            with self.current():
+                self._programs[key] = self.ctx.compute_shader(shader_source(name, defines))
         return self._programs[key]
 
     def release(self) -> None:
         if self.ctx is not None:
-            for p in getattr(self, "_programs", {}).values():
-                p.release()
-            self._programs = {}
+            with self.current():
+                for p in getattr(self, "_programs", {}).values():
+                    p.release()
+                self._programs = {}
             self.ctx.release()
             self.ctx = None
         if self._osmesa is not None:
@@ -130,6 +154,12 @@ class _OSMesaLoader:
 
     def load_opengl_function(self, name: str) -> int:
         return self._lib.OSMesaGetProcAddress(name.encode()) or 0
+
+    def __enter__(self):  # moderngl's Context.__enter__ calls this: make our context current
+        self._lib.OSMesaMakeCurrent(self._ctx, self._buffer, 0x1401, 1, 1)
+
+    def __exit__(self, *exc):  # OSMesa cannot restore another API's context; leave ours current
+        pass
 
     def release(self) -> None:
         if self._ctx:

@@ -2,15 +2,26 @@
 
 How a view is rendered
 ----------------------
-Every triangle is drawn as a conservative screen-space box around its projection; the fragment
-stage then intersects the pixel's own ray (source → pixel centre, or the parallel ray) with the
-exact triangle in float32, watertight (``shaders/ray.glsl``). A crossing where the ray leaves a
-solid adds its distance ``t`` and one where it enters subtracts it. Distances are measured from
-a point beside the scene, not from the source (``raysetup.py``), so the error does not grow with
-the source distance, and the rasteriser's sub-pixel snapping never decides which triangle a ray
-hits.
+Every crossing of a pixel's ray (source → pixel centre, or the parallel ray) with a triangle is
+found by an exact, watertight float32 ray-triangle test (``shaders/ray.glsl``), never by the
+rasteriser's coverage rules, so its sub-pixel snapping never decides which triangle a ray hits.
+Distances are measured from a point beside the scene, not from the source (``raysetup.py``),
+so the error does not grow with the source distance. Two passes find the candidate pixels:
 
-* ``method="sum"``: one additive pass per material, for scenes whose objects do not overlap.
+1. a compute pass over all triangles (``shaders/pathlength_small.comp``) tests a triangle whose
+   projected box holds at most ``small_triangle_pixels`` pixel centres against each of them,
+   and lists the larger triangles;
+2. the rasteriser draws each listed triangle grown by a margin (``shaders/grow.glsl``), and the
+   fragment stage runs the exact test for every pixel it covers.
+
+Dense meshes of sub-pixel triangles (most real scans) are cheaper in pass 1, whose cost is per
+triangle and parallel on every core; large triangles in pass 2, whose cost is per pixel.
+
+Crossings are recorded by one of two methods (``shaders/crossing.glsl``):
+
+* ``method="sum"``: an exit adds its distance ``t`` and an entry subtracts it, in a 32-bit
+  fixed-point accumulator per material and pixel: exact, order-independent, so a view renders to
+  the same bytes every time. For scenes whose objects do not overlap.
 * ``method="resolve"``: every crossing goes into a per-pixel list, which a compute pass sorts
   and sweeps: between two crossings the highest-priority object the ray is inside owns the
   length. Used when objects overlap.
@@ -37,6 +48,7 @@ log = logging.getLogger("xrayraster")
 _END = 0xFFFFFFFF
 _NODE_BYTES = 16
 _MIN_CROSSINGS = 16
+_SMALL_TRIANGLE_PIXELS = 64  # measured: 32-128 equally fast on llvmpipe at 256²-2048²
 
 
 class RenderError(ValueError):
@@ -45,21 +57,30 @@ class RenderError(ValueError):
 
 @dataclass
 class _SceneBuffers:
-    """A scene uploaded once (vertices relative to ``ref``) and reused for every view."""
+    """A scene uploaded once (vertices relative to ``ref``) and reused for every view.
+
+    Objects are numbered by rank (priority, then insertion), so the overlap pass can compare
+    owners by index; every face carries its object's number.
+    """
 
     scene: Scene
     revision: int
     ref: np.ndarray
-    vertices: moderngl.Buffer
-    faces: moderngl.Buffer
-    objects: list  # SceneObjects in draw order (by channel, then insertion)
-    ranges: list  # per object, in draw order: (first_vertex, vertex_count, channel, rank)
-    channel_ranges: list  # per channel: (first_vertex, vertex_count)
+    vertices: moderngl.Buffer  # vec4 per vertex (xyz mm relative to ref)
+    faces: moderngl.Buffer  # uvec4 per face: a, b, c, object
+    objects: moderngl.Buffer  # uvec4 per object: channel, active in this view
+    large: moderngl.Buffer  # indirect draw command + indices of the triangles pass 2 draws
+    large_corners: moderngl.Buffer  # the six window-space corners pass 2 draws for each
+    ranked: list  # SceneObjects by rank
+    channels: np.ndarray  # channel of each object, by rank
+    num_channels: int
+    num_triangles: int
+    fixed_scale: float  # fixed-point units per mm of the sum accumulators
     corners: np.ndarray  # (8, 3) bounding-box corners relative to ref
 
     def release(self) -> None:
-        self.vertices.release()
-        self.faces.release()
+        for buffer in (self.vertices, self.faces, self.objects, self.large, self.large_corners):
+            buffer.release()
 
 
 class Renderer:
@@ -67,24 +88,42 @@ class Renderer:
 
     ``supersampling=k`` averages k×k rays per pixel (sub-pixel centres on a regular grid):
     a time-versus-error knob at silhouettes, cost ∝ k².
+
+    ``small_triangle_pixels``: a triangle whose pixel box holds at most this many pixel centres
+    is tested pixel by pixel in a compute pass; larger ones go through the rasteriser. It only
+    moves work between two exact paths (the result is the same); 0 rasterises everything.
     """
 
-    def __init__(self, geometry, *, supersampling: int = 1, overlap: str = "auto", context: GLContext | None = None):
+    def __init__(
+        self,
+        geometry,
+        *,
+        supersampling: int = 1,
+        overlap: str = "auto",
+        small_triangle_pixels: int = _SMALL_TRIANGLE_PIXELS,
+        context: GLContext | None = None,
+    ):
         self.geometry = geometry
         self._vec = as_vector_geometry(geometry)
         if int(supersampling) != supersampling or supersampling < 1:
             raise RenderError(f"supersampling must be a positive integer, got {supersampling!r}")
         if overlap not in ("auto", "sum", "resolve"):
             raise RenderError(f"overlap must be 'auto', 'sum' or 'resolve', got {overlap!r}")
+        if int(small_triangle_pixels) != small_triangle_pixels or small_triangle_pixels < 0:
+            raise RenderError(f"small_triangle_pixels must be an integer >= 0, got {small_triangle_pixels!r}")
         self.supersampling = int(supersampling)
         self.overlap = overlap
+        self.small_triangle_pixels = int(small_triangle_pixels)
         self._render_vec = _refine(self._vec, self.supersampling)
         self._owns_context = context is None
         self.gl = context or GLContext()
         self._check_size()
+        # Vertices snap to 2^-bits px; 1/64 px is 8x that on the usual 8 sub-pixel bits.
+        self._snap_margin = max(1.0 / 64.0, 4.0 * 2.0 ** -int(self.gl.ctx.info.get("GL_SUBPIXEL_BITS", 4)))
         self._scene: _SceneBuffers | None = None
-        self._targets: list[moderngl.Framebuffer] = []
-        self._lists: dict = {}
+        self._buffers: dict[str, moderngl.Buffer] = {}
+        self._capacity = 0  # crossing nodes the node pool holds
+        self._max_crossings = _MIN_CROSSINGS
         self.last_method: str | None = None
 
     # -- public API -------------------------------------------------------------------------
@@ -101,14 +140,19 @@ class Renderer:
         if not -self._vec.num_views <= view < self._vec.num_views:
             raise RenderError(f"view {view} is out of range: the geometry has {self._vec.num_views} views")
         view %= self._vec.num_views
-        buffers = self._upload(scene)
         method = self._choose_method(scene)
-        skip = self._objects_behind_source(buffers, view)
-        rays = view_rays(self._render_vec, view, buffers.ref)
-        if method == "sum":
-            out = self._render_sum(buffers, rays, skip)
-        else:
-            out = self._render_resolve(buffers, rays, skip)
+        with self.gl.current():
+            buffers = self._upload(scene)
+            active = self._active_objects(buffers, view)
+            table = np.zeros((len(active), 4), np.uint32)
+            table[:, 0] = buffers.channels
+            table[:, 1] = active
+            buffers.objects.write(table.tobytes())
+            rays = view_rays(self._render_vec, view, buffers.ref)
+            if method == "sum":
+                out = self._render_sum(buffers, rays)
+            else:
+                out = self._render_resolve(buffers, rays)
         k = self.supersampling
         if k > 1:
             c, r, q = out.shape
@@ -117,18 +161,15 @@ class Renderer:
         return out
 
     def release(self) -> None:
-        if self._scene is not None:
-            self._scene.release()
-            self._scene = None
-        for fbo in self._targets:
-            for tex in fbo.color_attachments:
-                tex.release()
-            fbo.release()
-        self._targets = []
-        for obj in self._lists.values():
-            if hasattr(obj, "release"):
-                obj.release()
-        self._lists = {}
+        if self.gl is None:
+            return
+        with self.gl.current():
+            if self._scene is not None:
+                self._scene.release()
+                self._scene = None
+            for buffer in self._buffers.values():
+                buffer.release()
+            self._buffers = {}
         if self._owns_context and self.gl is not None:
             self.gl.release()
         self.gl = None
@@ -165,24 +206,24 @@ class Renderer:
             return cached
         if cached is not None:
             cached.release()
+            self._scene = None
         bounds = scene.bounds
         ref = bounds.mean(axis=0)
-        channels = scene.materials
+        materials = scene.materials
         ranked = sorted(scene.objects, key=lambda o: o.rank)
-        rank_of = {o.order: i for i, o in enumerate(ranked)}
-        draw_order = sorted(scene.objects, key=lambda o: (channels.index(o.material), o.order))
-        verts, faces, ranges, base, first = [], [], [], 0, 0
-        for o in draw_order:
-            verts.append((o.mesh.vertices - ref).astype(np.float32))
-            faces.append((o.mesh.faces + base).astype(np.uint32))
-            count = 3 * len(o.mesh.faces)
-            ranges.append((first, count, channels.index(o.material), rank_of[o.order]))
-            base += len(o.mesh.vertices)
-            first += count
-        channel_ranges = []
-        for c in range(len(channels)):
-            mine = [r for r in ranges if r[2] == c]
-            channel_ranges.append((mine[0][0], sum(r[1] for r in mine)))
+        verts, faces, base = [], [], 0
+        for number, o in enumerate(ranked):
+            v = np.zeros((len(o.mesh.vertices), 4), np.float32)
+            v[:, :3] = o.mesh.vertices - ref
+            f = np.full((len(o.mesh.faces), 4), number, np.uint32)
+            f[:, :3] = o.mesh.faces + base
+            verts.append(v)
+            faces.append(f)
+            base += len(v)
+        num_triangles = sum(len(f) for f in faces)
+        # Fixed point: the largest total (one bounding-box diagonal) must stay below 2^31 units.
+        diagonal = float(np.linalg.norm(bounds[1] - bounds[0]))
+        fixed_scale = 2.0 ** np.floor(np.log2(2.0**30 / diagonal))
         ctx = self.gl.ctx
         corners = np.array([[x, y, z] for x in bounds[:, 0] for y in bounds[:, 1] for z in bounds[:, 2]]) - ref
         self._scene = _SceneBuffers(
@@ -191,9 +232,14 @@ class Renderer:
             ref=ref,
             vertices=ctx.buffer(np.concatenate(verts).tobytes()),
             faces=ctx.buffer(np.concatenate(faces).tobytes()),
-            objects=draw_order,
-            ranges=ranges,
-            channel_ranges=channel_ranges,
+            objects=ctx.buffer(reserve=16 * len(ranked)),
+            large=ctx.buffer(reserve=4 * (4 + num_triangles)),
+            large_corners=ctx.buffer(reserve=6 * 8 * num_triangles),
+            ranked=ranked,
+            channels=np.array([materials.index(o.material) for o in ranked], np.uint32),
+            num_channels=len(materials),
+            num_triangles=num_triangles,
+            fixed_scale=float(fixed_scale),
             corners=corners,
         )
         return self._scene
@@ -210,155 +256,136 @@ class Renderer:
         self.last_method = method
         return method
 
-    def _objects_behind_source(self, buffers: _SceneBuffers, view: int) -> set:
-        """Indices (draw order) of objects wholly behind a cone-beam source, which no ray reaches.
+    def _active_objects(self, buffers: _SceneBuffers, view: int) -> np.ndarray:
+        """Per object (by rank): 0 when wholly behind a cone-beam source, which no ray reaches.
 
         An object that straddles the source plane is refused: its path lengths are undefined.
         """
+        active = np.ones(len(buffers.ranked), np.uint32)
         if self._vec.beam != "cone":
-            return set()
+            return active
         src, det, u, v = np.split(self._vec.array[view], 4)
         normal = np.cross(u, v)
         normal *= np.sign(normal @ (det - src))
         offset = (buffers.ref - src) @ normal  # depth of X is (X - ref)·normal + offset
         if np.all(buffers.corners @ normal + offset > 0):
-            return set()
-        skip = set()
-        for index, o in enumerate(buffers.objects):
+            return active
+        for number, o in enumerate(buffers.ranked):
             depth = (o.mesh.vertices - buffers.ref) @ normal + offset
             if np.all(depth <= 0):
-                skip.add(index)
+                active[number] = 0
             elif np.any(depth <= 0):
                 raise SceneError(
                     f"object {o.name!r} crosses the source plane in view {view}: the source would sit inside "
                     "or beside it. Move the object or the source (source_to_origin) so the object is in front of it."
                 )
-        if len(skip) < len(buffers.objects) and np.allclose(buffers.ref, src, rtol=0, atol=1e-9 * (1 + np.abs(src).max())):
+        if active.any() and np.allclose(buffers.ref, src, rtol=0, atol=1e-9 * (1 + np.abs(src).max())):
             raise SceneError(f"view {view}: the source sits at the centre of the scene's bounding box; move it")
-        return skip
+        return active
 
-    def _set_view_uniforms(self, prog: moderngl.Program, rays) -> None:
-        rows, cols = self._render_vec.detector_shape
-        prog["u_origin_num"].write(rays.origin_num.astype(np.float32).tobytes())
-        prog["u_origin_den"].write(rays.origin_den.astype(np.float32).tobytes())
-        prog["u_direction"].write(rays.direction.astype(np.float32).tobytes())
-        prog["u_half_detector"].value = (cols / 2.0, rows / 2.0)
-        prog["u_world_to_pixel"].write(rays.world_to_pixel.astype(np.float32).tobytes())
+    # -- crossings: every exact ray-triangle hit, recorded by crossing.glsl ------------------
 
-    def _bind_scene(self, buffers: _SceneBuffers) -> None:
-        buffers.vertices.bind_to_storage_buffer(0)
-        buffers.faces.bind_to_storage_buffer(1)
-
-    # -- single additive pass -------------------------------------------------------------------
-
-    def _render_sum(self, buffers: _SceneBuffers, rays, skip: set) -> np.ndarray:
+    def _record_crossings(self, buffers: _SceneBuffers, rays, defines: dict, uniforms: dict) -> None:
+        """Pass 1 (compute: small triangles) then pass 2 (rasteriser: the large ones it listed)."""
         ctx = self.gl.ctx
         rows, cols = self._render_vec.detector_shape
-        prog = self.gl.program("pathlength.vert", "pathlength_sum.frag")
-        self._set_view_uniforms(prog, rays)
-        self._bind_scene(buffers)
-        vao = self._vao(prog)
-        out = np.empty((len(buffers.channel_ranges), rows, cols), dtype=np.float32)
-        ctx.enable(moderngl.BLEND)
-        ctx.blend_func = moderngl.ONE, moderngl.ONE
-        ctx.blend_equation = moderngl.FUNC_ADD
-        try:
-            for c in range(len(buffers.channel_ranges)):
-                fbo = self._target(c)
-                fbo.use()
-                fbo.clear(0.0)
-                for index, (first, count, channel, _) in enumerate(buffers.ranges):
-                    if channel == c and index not in skip:
-                        vao.render(moderngl.TRIANGLES, vertices=count, first=first)
-                out[c] = np.frombuffer(fbo.read(components=1, dtype="f4"), dtype=np.float32).reshape(rows, cols)
-        finally:
-            ctx.disable(moderngl.BLEND)
-        return out
+        defines = {**defines, "MAX_SMALL_PIXELS": self.small_triangle_pixels}
+        small = self.gl.compute("pathlength_small.comp", defines)
+        large = self.gl.program("pathlength_large.vert", "pathlength_large.frag", defines)
+        uniforms = {
+            **uniforms,
+            "u_origin_num": rays.origin_num,
+            "u_origin_den": rays.origin_den,
+            "u_direction": rays.direction,
+            "u_world_to_pixel": rays.world_to_pixel,
+            "u_half_detector": (cols / 2.0, rows / 2.0),
+            "u_size": (cols, rows),
+            "u_num_triangles": buffers.num_triangles,
+            "u_snap_margin": self._snap_margin,
+        }
+        for prog in (small, large):
+            _set_uniforms(prog, uniforms)
+        for binding, buffer in enumerate((buffers.vertices, buffers.faces, buffers.objects, buffers.large)):
+            buffer.bind_to_storage_buffer(binding)
+        buffers.large_corners.bind_to_storage_buffer(7)
+        buffers.large.write(np.array([0, 1, 0, 0], np.uint32).tobytes())  # empty draw command
+        small.run((buffers.num_triangles + 63) // 64)
+        ctx.memory_barrier()
+        self._empty_framebuffer().use()
+        self._vao(large).render_indirect(buffers.large, moderngl.TRIANGLES, count=1)
+        ctx.memory_barrier()
 
-    def _target(self, channel: int) -> moderngl.Framebuffer:
-        ctx = self.gl.ctx
-        rows, cols = self._render_vec.detector_shape
-        while len(self._targets) <= channel:
-            tex = ctx.texture((cols, rows), 1, dtype="f4")
-            self._targets.append(ctx.framebuffer(color_attachments=[tex]))
-        return self._targets[channel]
+    def _empty_framebuffer(self) -> moderngl.Framebuffer:
+        if "framebuffer" not in self._buffers:
+            rows, cols = self._render_vec.detector_shape
+            self._buffers["framebuffer"] = self.gl.ctx.empty_framebuffer((cols, rows))
+        return self._buffers["framebuffer"]
 
     def _vao(self, prog: moderngl.Program) -> moderngl.VertexArray:
-        key = ("vao", prog.glo)
-        if key not in self._lists:
-            self._lists[key] = self.gl.ctx.vertex_array(prog, [])
-        return self._lists[key]
+        key = f"vao{prog.glo}"
+        if key not in self._buffers:
+            self._buffers[key] = self.gl.ctx.vertex_array(prog, [])
+        return self._buffers[key]
+
+    def _buffer(self, name: str, size: int) -> moderngl.Buffer:
+        """A scratch buffer of at least ``size`` bytes, kept between views."""
+        buffer = self._buffers.get(name)
+        if buffer is None or buffer.size < size:
+            if buffer is not None:
+                buffer.release()
+            buffer = self._buffers[name] = self.gl.ctx.buffer(reserve=size)
+        return buffer
+
+    # -- single pass: signed distances summed per pixel ------------------------------------------
+
+    def _render_sum(self, buffers: _SceneBuffers, rays) -> np.ndarray:
+        rows, cols = self._render_vec.detector_shape
+        size = 4 * buffers.num_channels * rows * cols
+        acc = self._buffer("accumulators", size)
+        acc.clear(size)
+        acc.bind_to_storage_buffer(4)
+        self._record_crossings(buffers, rays, {}, {"u_fixed_scale": buffers.fixed_scale})
+        units = np.frombuffer(acc.read(size=size), dtype=np.int32)
+        out = units / buffers.fixed_scale
+        return out.astype(np.float32).reshape(buffers.num_channels, rows, cols)
 
     # -- overlap resolution: per-pixel crossing lists ---------------------------------------------
 
-    def _render_resolve(self, buffers: _SceneBuffers, rays, skip: set) -> np.ndarray:
-        ctx = self.gl.ctx
+    def _render_resolve(self, buffers: _SceneBuffers, rays) -> np.ndarray:
         rows, cols = self._render_vec.detector_shape
         npix = rows * cols
-        nch = len(buffers.channel_ranges)
-        lists = self._crossing_lists(buffers)
-        collect = self.gl.program("pathlength.vert", "pathlength_collect.frag")
-        self._set_view_uniforms(collect, rays)
-        vao = self._vao(collect)
+        nch = buffers.num_channels
+        heads = self._buffers.get("heads")
+        if heads is None:
+            heads = self._buffers["heads"] = self.gl.ctx.buffer(np.full(npix, _END, np.uint32).tobytes())
+            self._grow_node_pool(4 * npix)
+        counters = self._buffer("counters", 16)
+        lengths = self._buffer("lengths", 4 * nch * npix)
         while True:
-            self._bind_scene(buffers)
-            lists["heads"].bind_to_image(0, read=True, write=True)
-            lists["nodes"].bind_to_storage_buffer(2)
-            lists["counter"].write(np.zeros(1, np.uint32).tobytes())
-            lists["counter"].bind_to_storage_buffer(3)
-            collect["u_capacity"].value = lists["capacity"]
-            self._target(0).use()
-            for index, (first, count, _, rank) in enumerate(buffers.ranges):
-                if index not in skip:
-                    collect["u_rank"].value = rank
-                    vao.render(moderngl.TRIANGLES, vertices=count, first=first)
-            ctx.memory_barrier()
-            used = int(np.frombuffer(lists["counter"].read(), np.uint32)[0])
-            if used > lists["capacity"]:
-                self._grow_node_pool(lists, used)
+            heads.bind_to_storage_buffer(4)
+            self._buffers["nodes"].bind_to_storage_buffer(5)
+            counters.write(np.zeros(4, np.uint32).tobytes())
+            counters.bind_to_storage_buffer(6)
+            self._record_crossings(buffers, rays, {"RESOLVE": 1}, {"u_capacity": self._capacity})
+            used = int(np.frombuffer(counters.read(size=4), np.uint32)[0])
+            if used > self._capacity:
+                self._grow_node_pool(used)
                 continue
-            depth = lists["max_crossings"]
-            resolve = self.gl.compute("pathlength_resolve.comp", {"MAX_CROSSINGS": depth, "NUM_CHANNELS": nch})
-            lists["rank_channel"].bind_to_storage_buffer(4)
-            lists["lengths"].bind_to_storage_buffer(5)
-            lists["overflow"].write(np.zeros(2, np.uint32).tobytes())
-            lists["overflow"].bind_to_storage_buffer(6)
+            resolve = self.gl.compute("pathlength_resolve.comp", {"MAX_CROSSINGS": self._max_crossings, "NUM_CHANNELS": nch})
+            buffers.objects.bind_to_storage_buffer(2)
+            lengths.bind_to_storage_buffer(7)
             resolve["u_size"].value = (cols, rows)
             resolve.run((cols + 7) // 8, (rows + 7) // 8, 1)
-            ctx.memory_barrier()
-            overflow, max_depth = np.frombuffer(lists["overflow"].read(), np.uint32)
+            self.gl.ctx.memory_barrier()
+            _, overflow, max_depth, _ = np.frombuffer(counters.read(), np.uint32)
             if overflow:
-                lists["max_crossings"] = int(2 ** np.ceil(np.log2(max_depth)))
+                self._max_crossings = int(2 ** np.ceil(np.log2(max_depth)))
                 log.info("path lengths: %d pixels with up to %d crossings; re-rendering", overflow, max_depth)
                 continue
-            data = np.frombuffer(lists["lengths"].read(size=4 * nch * npix), dtype=np.float32)
+            data = np.frombuffer(lengths.read(size=4 * nch * npix), dtype=np.float32)
             return data.reshape(nch, rows, cols).copy()
 
-    def _crossing_lists(self, buffers: _SceneBuffers) -> dict:
-        ctx = self.gl.ctx
-        rows, cols = self._render_vec.detector_shape
-        nch = len(buffers.channel_ranges)
-        lists = self._lists
-        if "heads" not in lists:
-            lists["heads"] = ctx.texture((cols, rows), 1, dtype="u4")
-            lists["heads"].write(np.full(rows * cols, _END, np.uint32).tobytes())
-            lists["capacity"] = 0
-            lists["nodes"] = ctx.buffer(reserve=_NODE_BYTES)
-            lists["counter"] = ctx.buffer(reserve=4)
-            lists["overflow"] = ctx.buffer(reserve=8)
-            lists["max_crossings"] = _MIN_CROSSINGS
-            self._grow_node_pool(lists, 4 * rows * cols)
-        table = np.zeros(len(buffers.ranges), np.uint32)
-        for _, _, channel, rank in buffers.ranges:
-            table[rank] = channel
-        if "rank_channel" in lists:
-            lists["rank_channel"].release()
-            lists["lengths"].release()
-        lists["rank_channel"] = ctx.buffer(table.tobytes())
-        lists["lengths"] = ctx.buffer(reserve=4 * nch * rows * cols)
-        return lists
-
-    def _grow_node_pool(self, lists: dict, needed: int) -> None:
+    def _grow_node_pool(self, needed: int) -> None:
         rows, cols = self._render_vec.detector_shape
         capacity = int(needed * 1.25) + 1024
         size = capacity * _NODE_BYTES
@@ -369,11 +396,21 @@ class Renderer:
                 f"storing them needs {size / 2**30:.1f} GiB. Reduce the detector size or supersampling, "
                 "or render without overlap resolution (overlap='sum') if the objects do not really overlap"
             )
-        lists["nodes"].release()
-        lists["nodes"] = self.gl.ctx.buffer(reserve=size)
-        lists["capacity"] = capacity
-        # A list cut short by the overflow is in the heads image: empty every list.
-        lists["heads"].write(np.full(rows * cols, _END, np.uint32).tobytes())
+        self._buffer("nodes", size)
+        self._capacity = capacity
+        # A list cut short by the overflow is in the heads buffer: empty every list.
+        self._buffers["heads"].write(np.full(rows * cols, _END, np.uint32).tobytes())
+
+
+def _set_uniforms(prog, values: dict) -> None:
+    """Set the uniforms ``prog`` uses (the compiler drops the ones a stage does not read)."""
+    for name, value in values.items():
+        if name not in prog:
+            continue
+        if isinstance(value, np.ndarray):
+            prog[name].write(value.astype(np.float32).tobytes())
+        else:
+            prog[name].value = value
 
 
 def _refine(vec: VectorGeometry, k: int) -> VectorGeometry:

@@ -1,0 +1,33 @@
+// Where a ray-surface crossing goes. Two variants, chosen by the RESOLVE define:
+//  * sum (default): the signed distance goes into the pixel's 32-bit fixed-point accumulator of
+//    the object's channel. Integer addition is exact and order-independent, so the total is
+//    deterministic; it wraps modulo 2^32, so only the final length (< 2^31 ulps, set by
+//    u_fixed_scale from the scene size) must fit, never the single terms.
+//  * RESOLVE: the crossing is appended to the pixel's linked list for pathlength_resolve.comp.
+
+#ifdef RESOLVE
+layout(std430, binding = 4) buffer Heads { uint heads[]; };                 // per pixel, 0xFFFFFFFF = empty
+layout(std430, binding = 5) writeonly buffer Nodes { uvec4 nodes[]; };      // t bits, object*2 + exit, next, -
+layout(std430, binding = 6) buffer Counters { uint node_count; uint overflow_pixels; uint max_depth; };
+uniform uint u_capacity;
+
+void record_crossing(ivec2 px, uint object, int side, float t) {
+    uint slot = atomicAdd(node_count, 1u);
+    if (slot < u_capacity) {
+        uint next = atomicExchange(heads[px.y * u_size.x + px.x], slot);
+        nodes[slot] = uvec4(floatBitsToUint(t), 2u * object + uint(side > 0), next, 0u);
+    }
+}
+#else
+layout(std430, binding = 4) buffer Accumulators { uint acc[]; };            // (channel, row, col)
+uniform float u_fixed_scale;  // fixed-point units per mm, a power of two
+
+void record_crossing(ivec2 px, uint object, int side, float t) {
+    float a = round(abs(t) * u_fixed_scale);
+    // a mod 2^32, exact in float32: above 2^32 the spacing of floats is already >= 2^9.
+    uint units = uint(a - 4294967296.0 * floor(a * (1.0 / 4294967296.0)));
+    bool add = (side > 0) == (t >= 0.0);  // exits add t, entries subtract it
+    uint index = (objects[object].x * uint(u_size.y) + uint(px.y)) * uint(u_size.x) + uint(px.x);
+    atomicAdd(acc[index], add ? units : 0u - units);
+}
+#endif

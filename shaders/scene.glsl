@@ -1,0 +1,35 @@
+// Shared by the crossing stages: the scene's triangles (uploaded once, positions relative to
+// the scene reference point) and the pixel box a triangle's projection can cover.
+
+layout(std430, binding = 0) readonly buffer Vertices { vec4 vertices[]; };       // xyz mm, w unused
+layout(std430, binding = 1) readonly buffer Faces { uvec4 faces[]; };            // a, b, c, object
+layout(std430, binding = 2) readonly buffer Objects { uvec4 objects[]; };        // channel, active, -, -
+
+uniform mat3x4 u_world_to_pixel;  // transposed 3x4: h = P (x - ref, 1); c' = h.x/h.z, r' = h.y/h.z
+uniform ivec2 u_size;             // detector (cols, rows)
+uniform float u_snap_margin;      // px: eight times the rasteriser's largest vertex snap
+
+struct Triangle { vec3 a; vec3 b; vec3 c; uint object; };
+
+// Objects are numbered by rank (priority, then insertion), so `object` also orders ownership.
+Triangle fetch_triangle(uint index) {
+    uvec4 f = faces[index];
+    return Triangle(vertices[f.x].xyz, vertices[f.y].xyz, vertices[f.z].xyz, f.w);
+}
+
+vec2 to_window(vec3 x) {
+    vec3 h = vec4(x, 1.0) * u_world_to_pixel;
+    return h.xy / h.z + vec2(u_size) * 0.5;
+}
+
+// Margin (px) by which a projected triangle with window box [lo, hi] is grown: the
+// rasteriser's sub-pixel snapping plus float32 rounding of the projection, with room to spare.
+float margin(vec2 lo, vec2 hi) {
+    return u_snap_margin + 1e-6 * max(max(abs(lo.x), abs(lo.y)), max(abs(hi.x), abs(hi.y)));
+}
+
+// First and last pixel (column, row) whose centre lies in the box, clipped to the detector.
+void pixel_range(vec2 lo, vec2 hi, out ivec2 first, out ivec2 last) {
+    first = max(ivec2(ceil(lo - 0.5)), ivec2(0));
+    last = min(ivec2(floor(hi - 0.5)), u_size - 1);
+}
