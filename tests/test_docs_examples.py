@@ -1,0 +1,139 @@
+"""The documentation's examples work: every ```python block of README.md and docs/*.md runs, every
+```toml block loads through the scene loader (and renders), and the README's commands are the ones
+CI runs.
+
+Python blocks run one by one in a fresh namespace, with the working directory a temporary folder
+in which ``examples/`` points at the repository's examples. A block that uses the renderer needs
+OpenGL: it takes the ``gl`` fixture, so it skips with the reason when there is none, unless
+XRAYRASTER_REQUIRE_GL=1. A toml block preceded by ``<!-- expect-error: REGEX -->`` must fail to
+load with a message matching REGEX; every other toml block must load and render.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+FENCE = re.compile(r"^```(\w*)[^\n]*\n(.*?)^```[ \t]*$", re.MULTILINE | re.DOTALL)
+EXPECT_ERROR = re.compile(r"<!--\s*expect-error:\s*(.*?)\s*-->\s*$")
+NEEDS_GL = re.compile(r"\b(Renderer|GLContext)\b")
+
+
+def _blocks(lang: str) -> list:
+    found = []
+    for doc in DOCS:
+        text = doc.read_text()
+        for m in FENCE.finditer(text):
+            if m.group(1) != lang:
+                continue
+            line = text.count("\n", 0, m.start(2)) + 1  # first line of the block's body
+            before = text[: m.start()].rstrip("\n").rsplit("\n", 1)[-1]
+            expect = EXPECT_ERROR.search(before)
+            found.append((doc, line, m.group(2), expect.group(1) if expect else None))
+    return found
+
+
+def _params(blocks):
+    return [pytest.param(*b, id=f"{b[0].relative_to(ROOT)}:{b[1]}") for b in blocks]
+
+
+PYTHON = _blocks("python")
+TOML = _blocks("toml")
+SCENES = [b for b in TOML if b[3] is None]
+
+
+def test_the_docs_have_examples():
+    """Guards against a parser or layout change that silently finds nothing to test."""
+    assert (ROOT / "README.md").exists() and (ROOT / "docs" / "scene-format.md").exists()
+    assert any(doc.name == "README.md" for doc, *_ in PYTHON)
+    assert {doc.name for doc, *_ in PYTHON} >= {"README.md", "geometry.md", "scene-format.md"}
+    assert len(SCENES) >= 3 and len(TOML) > len(SCENES)
+
+
+@pytest.fixture
+def workdir(tmp_path, monkeypatch):
+    (tmp_path / "examples").symlink_to(ROOT / "examples", target_is_directory=True)
+    monkeypatch.chdir(tmp_path)
+    return tmp_path
+
+
+@pytest.mark.parametrize("doc, line, code, expect", _params(PYTHON))
+def test_python_block_runs(doc, line, code, expect, workdir, request):
+    if NEEDS_GL.search(code):
+        request.getfixturevalue("gl")  # skip (or fail under XRAYRASTER_REQUIRE_GL=1) without OpenGL
+    # Pad so that a traceback's line numbers are the markdown file's.
+    compiled = compile("\n" * (line - 1) + code, str(doc), "exec")
+    exec(compiled, {"__name__": "__doc_example__"})
+
+
+def _write_scene(tmp_path: Path, text: str) -> Path:
+    """The block as a file beside a ``meshes/`` link, so its relative mesh paths resolve as in examples/."""
+    (tmp_path / "meshes").symlink_to(ROOT / "examples" / "meshes", target_is_directory=True)
+    path = tmp_path / "scene.toml"
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize("doc, line, text, expect", _params(TOML))
+def test_toml_block_loads(doc, line, text, expect, tmp_path):
+    from xrayraster.config import load_scene_file
+
+    path = _write_scene(tmp_path, text)
+    if expect is not None:
+        with pytest.raises(ValueError, match=expect):
+            load_scene_file(path)
+        return
+    loaded = load_scene_file(path)
+    assert len(loaded.scene) >= 1 and loaded.geometry.num_views >= 1
+
+
+@pytest.mark.parametrize("doc, line, text, expect", _params(SCENES))
+def test_toml_scene_renders_every_material(doc, line, text, expect, tmp_path, gl):
+    """A documented scene that loads but shows nothing (object behind the source, off the detector) is broken too."""
+    from xrayraster import Renderer
+    from xrayraster.config import load_scene_file
+
+    loaded = load_scene_file(_write_scene(tmp_path, text))
+    with Renderer(loaded.geometry, context=gl) as renderer:
+        lengths = renderer.path_lengths(loaded.scene, 0)
+    assert lengths.shape == (len(loaded.scene.materials), *loaded.geometry.detector_shape)
+    assert np.all(np.isfinite(lengths))
+    visible = lengths.max(axis=(1, 2)) > 0
+    assert visible.all(), f"materials not in view 0: {[m for m, v in zip(loaded.scene.materials, visible) if not v]}"
+
+
+def test_bundled_examples_are_quoted_verbatim_in_the_format_reference():
+    quoted = {text.strip() for doc, _, text, _ in TOML if doc.name == "scene-format.md"}
+    examples = sorted((ROOT / "examples").glob("*.toml"))
+    assert examples
+    for example in examples:
+        assert example.read_text().strip() in quoted, f"{example.name} differs from its copy in docs/scene-format.md"
+
+
+def _readme_commands() -> list[str]:
+    first = FENCE.search((ROOT / "README.md").read_text())
+    return [line for line in first.group(2).splitlines() if line.strip()]
+
+
+def test_readme_starts_with_the_two_commands():
+    text = (ROOT / "README.md").read_text()
+    assert text.startswith("```"), "README.md must open with the commands block"
+    assert _readme_commands() == [
+        'pip install ".[test]" && xrayraster render examples/bracket_and_ball.toml -o out/bracket.tif --path-lengths --views all',
+        "pytest",
+    ]
+
+
+def test_ci_runs_the_readme_command_verbatim():
+    ci = ROOT / ".ci" / "run"
+    assert os.access(ci, os.X_OK), ".ci/run must be executable"
+    code = [line.strip() for line in ci.read_text().splitlines() if not line.lstrip().startswith("#")]
+    assert any(line.startswith(_readme_commands()[0]) for line in code), ".ci/run must run the README's first command exactly"
+    pytest_lines = [line for line in code if "python -m pytest" in line]
+    assert pytest_lines and all("XRAYRASTER_REQUIRE_GL=1" in line for line in pytest_lines)

@@ -1,0 +1,7 @@
+"""``python -m xrayraster``: the same command line as the ``xrayraster`` console script."""
+
+import sys
+
+from .cli import main
+
+sys.exit(main())
