@@ -1,6 +1,7 @@
 // Where a ray-surface crossing goes. Two variants, chosen by the RESOLVE define:
 //  * sum (default): the signed distance goes into the pixel's 32-bit fixed-point accumulator of
-//    the object's channel. Integer addition is exact and order-independent, so the total is
+//    the object's channel, and, for an object nested in another (Scene.nesting), is taken off
+//    its container's channel. Integer addition is exact and order-independent, so the total is
 //    deterministic; it wraps modulo 2^32, so only the final length (< 2^31 ulps, set by
 //    u_fixed_scale from the scene size) must fit, never the single terms.
 //  * RESOLVE: the crossing is appended to the pixel's linked list for pathlength_resolve.comp.
@@ -26,8 +27,11 @@ void record_crossing(ivec2 px, uint object, int side, float t) {
     float a = round(abs(t) * u_fixed_scale);
     // a mod 2^32, exact in float32: above 2^32 the spacing of floats is already >= 2^9.
     uint units = uint(a - 4294967296.0 * floor(a * (1.0 / 4294967296.0)));
-    bool add = (side > 0) == (t >= 0.0);  // exits add t, entries subtract it
-    uint index = (objects[object].x * uint(u_size.y) + uint(px.y)) * uint(u_size.x) + uint(px.x);
-    atomicAdd(acc[index], add ? units : 0u - units);
+    uint value = (side > 0) == (t >= 0.0) ? units : 0u - units;  // exits add t, entries subtract it
+    uint pixel = uint(px.y) * uint(u_size.x) + uint(px.x);
+    uint npix = uint(u_size.x) * uint(u_size.y);
+    uvec4 info = objects[object];  // channel, active, container channel + 1 (0: none)
+    atomicAdd(acc[info.x * npix + pixel], value);
+    if (info.z != 0u) atomicAdd(acc[(info.z - 1u) * npix + pixel], 0u - value);
 }
 #endif

@@ -4,7 +4,7 @@
 // = priority, then insertion order), and that object's material gets the length.
 
 layout(local_size_x = 8, local_size_y = 8) in;
-layout(std430, binding = 2) readonly buffer Objects { uvec4 objects[]; };  // channel, active, -, -
+layout(std430, binding = 2) readonly buffer Objects { uvec4 objects[]; };  // channel, active, (container channel + 1), -
 layout(std430, binding = 4) buffer Heads { uint heads[]; };
 layout(std430, binding = 5) readonly buffer Nodes { uvec4 nodes[]; };      // t bits, object*2 + exit, next, -
 layout(std430, binding = 6) buffer Counters { uint node_count; uint overflow_pixels; uint max_depth; };

@@ -3,7 +3,7 @@
 
 layout(std430, binding = 0) readonly buffer Vertices { vec4 vertices[]; };       // xyz mm, w unused
 layout(std430, binding = 1) readonly buffer Faces { uvec4 faces[]; };            // a, b, c, object
-layout(std430, binding = 2) readonly buffer Objects { uvec4 objects[]; };        // channel, active, -, -
+layout(std430, binding = 2) readonly buffer Objects { uvec4 objects[]; };        // channel, active, container channel + 1, -
 
 uniform mat3x4 u_world_to_pixel;  // transposed 3x4: h = P (x - ref, 1); c' = h.x/h.z, r' = h.y/h.z
 uniform ivec2 u_size;             // detector (cols, rows)

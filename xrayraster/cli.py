@@ -32,7 +32,7 @@ def main(argv=None) -> int:
     render.add_argument("--path-lengths", action="store_true", help="write per-material path lengths in mm")
     render.add_argument("--views", default="0", help="comma-separated view indices, or 'all' (default: 0)")
     render.add_argument("--supersampling", type=int, default=1, help="k×k rays per pixel (default 1)")
-    render.add_argument("--overlap", choices=("auto", "sum", "resolve"), default="auto", help="overlap handling (default auto)")
+    render.add_argument("--overlap", choices=("auto", "sum", "nested", "resolve"), default="auto", help="overlap handling (default auto)")
     render.add_argument("-v", "--verbose", action="store_true")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(message)s")

@@ -22,12 +22,16 @@ Crossings are recorded by one of two methods (``shaders/crossing.glsl``):
 * ``method="sum"``: an exit adds its distance ``t`` and an entry subtracts it, in a 32-bit
   fixed-point accumulator per material and pixel: exact, order-independent, so a view renders to
   the same bytes every time. For scenes whose objects do not overlap.
+* ``method="nested"``: the same single pass when every overlap is one object wholly inside
+  another (yarns in a matrix block, inclusions): each object also takes its length off its
+  container's channel (:meth:`Scene.nesting`), which is the priority rule without sorting.
 * ``method="resolve"``: every crossing goes into a per-pixel list, which a compute pass sorts
   and sweeps: between two crossings the highest-priority object the ray is inside owns the
-  length. Used when objects overlap.
+  length. Used when objects overlap partially.
 
-``overlap="auto"`` (default) picks ``sum`` unless :meth:`Scene.overlaps` finds overlapping
-objects; the choice is logged and kept in :attr:`Renderer.last_method`.
+``overlap="auto"`` (default) picks ``sum`` when :meth:`Scene.overlaps` finds no overlapping
+objects, ``nested`` when all overlaps are containments, else ``resolve``; the choice is logged
+and kept in :attr:`Renderer.last_method`, and any method can be forced.
 """
 
 from __future__ import annotations
@@ -107,8 +111,8 @@ class Renderer:
         self._vec = as_vector_geometry(geometry)
         if int(supersampling) != supersampling or supersampling < 1:
             raise RenderError(f"supersampling must be a positive integer, got {supersampling!r}")
-        if overlap not in ("auto", "sum", "resolve"):
-            raise RenderError(f"overlap must be 'auto', 'sum' or 'resolve', got {overlap!r}")
+        if overlap not in ("auto", "sum", "nested", "resolve"):
+            raise RenderError(f"overlap must be 'auto', 'sum', 'nested' or 'resolve', got {overlap!r}")
         if int(small_triangle_pixels) != small_triangle_pixels or small_triangle_pixels < 0:
             raise RenderError(f"small_triangle_pixels must be an integer >= 0, got {small_triangle_pixels!r}")
         self.supersampling = int(supersampling)
@@ -143,13 +147,16 @@ class Renderer:
         method = self._choose_method(scene)
         with self.gl.current():
             buffers = self._upload(scene)
-            active = self._active_objects(buffers, view)
-            table = np.zeros((len(active), 4), np.uint32)
+            table = np.zeros((len(buffers.ranked), 4), np.uint32)
             table[:, 0] = buffers.channels
-            table[:, 1] = active
+            table[:, 1] = self._active_objects(buffers, view)
+            if method == "nested":
+                drawn, container = _nesting_columns(scene, buffers).T
+                table[:, 1] *= drawn
+                table[:, 2] = container
             buffers.objects.write(table.tobytes())
             rays = view_rays(self._render_vec, view, buffers.ref)
-            if method == "sum":
+            if method in ("sum", "nested"):
                 out = self._render_sum(buffers, rays)
             else:
                 out = self._render_resolve(buffers, rays)
@@ -245,12 +252,17 @@ class Renderer:
         return self._scene
 
     def _choose_method(self, scene: Scene) -> str:
+        if self.overlap == "nested" and scene.nesting() is None:
+            raise RenderError("overlap='nested' needs every overlap to be one object wholly inside another; "
+                              "this scene has partial overlaps: use overlap='resolve' or 'auto'")
         if self.overlap != "auto":
             method, why = self.overlap, "forced"
+        elif not (pairs := scene.overlaps()):
+            method, why = "sum", "no overlaps"
+        elif scene.nesting() is not None:
+            method, why = "nested", f"{len(pairs)} overlapping pairs, each one object inside another"
         else:
-            pairs = scene.overlaps()
-            method = "resolve" if pairs else "sum"
-            why = f"{len(pairs)} overlapping pairs" if pairs else "no overlaps"
+            method, why = "resolve", f"{len(pairs)} overlapping pairs, some partial"
         if method != self.last_method:
             log.info("path lengths: method=%s (%s)", method, why)
         self.last_method = method
@@ -400,6 +412,21 @@ class Renderer:
         self._capacity = capacity
         # A list cut short by the overflow is in the heads buffer: empty every list.
         self._buffers["heads"].write(np.full(rows * cols, _END, np.uint32).tobytes())
+
+
+def _nesting_columns(scene: Scene, buffers: _SceneBuffers) -> np.ndarray:
+    """Per object (by rank): (1 if it is drawn else 0, its container's channel + 1 or 0)."""
+    nesting = scene.nesting()
+    channel = {o.order: c for o, c in zip(buffers.ranked, buffers.channels)}
+    columns = np.zeros((len(buffers.ranked), 2), np.uint32)
+    columns[:, 0] = 1
+    for k, o in enumerate(buffers.ranked):
+        container = nesting[o.order]
+        if container == o.order or (container is not None and channel[container] == channel[o.order]):
+            columns[k, 0] = 0  # hidden, or +L and -L in one channel: nothing to draw
+        elif container is not None:
+            columns[k, 1] = channel[container] + 1
+    return columns
 
 
 def _set_uniforms(prog, values: dict) -> None:

@@ -43,7 +43,8 @@ class Scene:
     def __init__(self):
         self._objects: list[SceneObject] = []
         self.revision = 0  # bumped by every change, so renderers know to re-upload
-        self._overlaps: list[tuple[str, str]] | None = None
+        self._overlaps: list[_Overlap] | None = None
+        self._nesting: tuple[list[int | None] | None] | None = None  # (result,) once computed
 
     def add(
         self,
@@ -86,6 +87,7 @@ class Scene:
         self._objects.append(obj)
         self.revision += 1
         self._overlaps = None
+        self._nesting = None
         return obj
 
     @property
@@ -129,15 +131,57 @@ class Scene:
         the smaller object counts. Those that manifold3d cannot read count as overlapping, so the
         renderer errs on the side of resolving priorities.
         """
+        return [(self._objects[o.a].name, self._objects[o.b].name) for o in self._find_overlaps()]
+
+    def nesting(self) -> list[int | None] | None:
+        """When every overlap is one object wholly inside another: per object (insertion order),
+        the object whose length it subtracts from, or None.
+
+        Then ownership needs no sorting: an object owns its length minus that of the visible
+        objects nested directly in it. Each visible object therefore subtracts its length from
+        its smallest visible container; an object inside a container that outranks it is
+        hidden (its entry is its own index: it contributes nothing). Returns None when some
+        overlap is partial (the renderer then resolves per ray). "Wholly inside" allows 1e-6 of
+        the object's volume outside, the tolerance of the overlap test; shared boundary faces
+        (a yarn cut flush with its matrix block) count as inside.
+        """
+        if self._nesting is None:
+            self._nesting = (_nesting(self._objects, self._find_overlaps()),)
+        return self._nesting[0]
+
+    def _find_overlaps(self) -> list["_Overlap"]:
         if self._overlaps is None:
             self._overlaps = _find_overlaps(self._objects)
-        return list(self._overlaps)
+        return self._overlaps
 
 
-def _find_overlaps(objects: list[SceneObject]) -> list[tuple[str, str]]:
+def _nesting(objects: list[SceneObject], overlaps: list["_Overlap"]) -> list[int | None] | None:
+    if any(o.inner is None for o in overlaps):
+        return None
+    containers: dict[int, list[int]] = {}
+    for o in overlaps:
+        containers.setdefault(o.inner, []).append(o.b if o.inner == o.a else o.a)
+    volume = [o.mesh.volume for o in objects]
+    rank = [o.rank for o in objects]
+    hidden = {i for i, outer in containers.items() if any(rank[j] > rank[i] for j in outer)}
+    out: list[int | None] = []
+    for i in range(len(objects)):
+        visible = [j for j in containers.get(i, []) if j not in hidden]
+        out.append(i if i in hidden else min(visible, key=lambda j: volume[j], default=None))
+    return out
+
+
+@dataclass(frozen=True)
+class _Overlap:
+    a: int  # insertion indices, a < b
+    b: int
+    inner: int | None  # the one wholly inside the other, if either is
+
+
+def _find_overlaps(objects: list[SceneObject]) -> list[_Overlap]:
     bounds = [o.mesh.bounds for o in objects]
     solids: dict[int, object] = {}
-    pairs = []
+    found = []
     for i in range(len(objects)):
         for j in range(i + 1, len(objects)):
             (lo_a, hi_a), (lo_b, hi_b) = bounds[i], bounds[j]
@@ -145,12 +189,13 @@ def _find_overlaps(objects: list[SceneObject]) -> list[tuple[str, str]]:
                 continue
             a, b = (_solid(objects[k], solids) for k in (i, j))
             if a is None or b is None:
-                pairs.append((objects[i].name, objects[j].name))
+                found.append(_Overlap(i, j, None))
                 continue
             shared = (a ^ b).volume()
-            if shared > 1e-6 * min(a.volume(), b.volume()):
-                pairs.append((objects[i].name, objects[j].name))
-    return pairs
+            small, inner = min((a.volume(), i), (b.volume(), j))
+            if shared > 1e-6 * small:
+                found.append(_Overlap(i, j, inner if shared >= (1 - 1e-6) * small else None))
+    return found
 
 
 def _solid(obj: SceneObject, cache: dict):
