@@ -16,7 +16,8 @@ layout(std430, binding = 7) writeonly buffer LargeCorners { vec2 large_corners[]
 uniform uint u_num_triangles;
 
 void main() {
-    uint index = gl_GlobalInvocationID.x;
+    // 2-D dispatch: one dimension holds at most 65535 groups (4 M triangles) on many drivers.
+    uint index = (gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * gl_WorkGroupSize.x + gl_LocalInvocationIndex;
     if (index >= u_num_triangles) return;
     Triangle tri = fetch_triangle(index);
     if (objects[tri.object].y == 0u) return;  // behind the source in this view

@@ -106,3 +106,17 @@ def test_bad_split_is_refused(gl):
     geom = xr.ConeBeamGeometry(40.0, 100.0, (8, 8), 0.2, [0.0])
     with pytest.raises(xr.RenderError, match="small_triangle_pixels"):
         xr.Renderer(geom, context=gl, small_triangle_pixels=-1)
+
+
+def test_triangle_pass_spans_two_dispatch_dimensions(gl):
+    """Scenes beyond 65535 × 64 triangles need a 2-D dispatch; force it with a tiny row limit."""
+    rng = np.random.default_rng(2)
+    scene = xr.Scene()
+    for m in convex_scene(rng):
+        scene.add(m, "m")
+    geom = xr.ConeBeamGeometry(40.0, 100.0, (N, N), 0.2, [0.2])
+    with xr.Renderer(geom, context=gl) as r:
+        want = r.path_lengths(scene)
+        r._max_groups = 7  # 2,104 triangles: 33 groups in rows of 7, the last row partly empty
+        assert scene.num_triangles > 7 * 64 * 2
+        np.testing.assert_array_equal(r.path_lengths(scene), want)

@@ -72,7 +72,7 @@ class _SceneBuffers:
     ref: np.ndarray
     vertices: moderngl.Buffer  # vec4 per vertex (xyz mm relative to ref)
     faces: moderngl.Buffer  # uvec4 per face: a, b, c, object
-    objects: moderngl.Buffer  # uvec4 per object: channel, active in this view
+    objects: moderngl.Buffer  # uvec4 per object: channel, drawn in this view, container channel + 1
     large: moderngl.Buffer  # indirect draw command + indices of the triangles pass 2 draws
     large_corners: moderngl.Buffer  # the six window-space corners pass 2 draws for each
     ranked: list  # SceneObjects by rank
@@ -124,6 +124,7 @@ class Renderer:
         self._check_size()
         # Vertices snap to 2^-bits px; 1/64 px is 8x that on the usual 8 sub-pixel bits.
         self._snap_margin = max(1.0 / 64.0, 4.0 * 2.0 ** -int(self.gl.ctx.info.get("GL_SUBPIXEL_BITS", 4)))
+        self._max_groups = int(self.gl.ctx.info["GL_MAX_COMPUTE_WORK_GROUP_COUNT"][0])
         self._scene: _SceneBuffers | None = None
         self._buffers: dict[str, moderngl.Buffer] = {}
         self._capacity = 0  # crossing nodes the node pool holds
@@ -321,7 +322,9 @@ class Renderer:
             buffer.bind_to_storage_buffer(binding)
         buffers.large_corners.bind_to_storage_buffer(7)
         buffers.large.write(np.array([0, 1, 0, 0], np.uint32).tobytes())  # empty draw command
-        small.run((buffers.num_triangles + 63) // 64)
+        groups = (buffers.num_triangles + 63) // 64
+        wide = min(groups, self._max_groups)
+        small.run(wide, (groups + wide - 1) // wide)
         ctx.memory_barrier()
         self._empty_framebuffer().use()
         self._vao(large).render_indirect(buffers.large, moderngl.TRIANGLES, count=1)
