@@ -71,14 +71,14 @@ def test_values_equal_the_renderer_on_the_same_scene(rendered, reference):
     assert np.all(reference[:, 0].max(axis=(1, 2)) > 4)  # and the bracket
 
 
-def test_png_quicklook_is_view_0_summed_over_materials(rendered, reference):
+def test_png_quicklook_is_view_0_summed_over_materials_with_z_up(rendered, reference):
     png = rendered.with_suffix(".png")
     with Image.open(png) as image:
         image.verify()
     with Image.open(png) as image:
         assert image.format == "PNG" and image.mode == "L" and image.size == (320, 256)
         pixels = np.asarray(image)
-    total = reference[0].sum(axis=0)
+    total = reference[0].sum(axis=0)[::-1]  # picture row 0 = the highest detector row
     expected = np.round(255 * np.clip(total / total.max(), 0, 1)).astype(np.uint8)
     assert np.abs(pixels.astype(int) - expected).max() <= 1
     assert pixels.max() == 255 and pixels.min() == 0

@@ -30,6 +30,9 @@ _GEOMETRY_KEYS = {
     "detector_offset", "num_views", "angles_deg", "start_angle_deg",
 }
 _OBJECT_KEYS = {"name", "mesh", "material", "label", "priority", "unit_scale", "translate", "rotate_deg"}
+_PRIMITIVE_KEYS = {"box": {"box"}, "sphere": {"sphere", "subdivisions"}, "cylinder": {"cylinder", "height", "sections"}}
+_MAX_SUBDIVISIONS = 8  # 1.3 million triangles
+_MAX_SECTIONS = 10_000
 
 
 def load_scene_file(path) -> SceneFile:
@@ -43,27 +46,47 @@ def load_scene_file(path) -> SceneFile:
     _only(data, {"geometry", "objects"}, f"{path}")
     if "geometry" not in data:
         raise ConfigError(f"{path}: missing [geometry] table")
+    if not isinstance(data["geometry"], dict):
+        raise ConfigError(f"{path}: geometry must be a table ([geometry]), got {data['geometry']!r}")
     geometry = _geometry(data["geometry"], f"{path} [geometry]")
     objects = data.get("objects", [])
+    if not isinstance(objects, list):
+        raise ConfigError(f"{path}: objects must be an array of tables ([[objects]]), got {objects!r}")
     if not objects:
         raise ConfigError(f"{path}: no [[objects]]; add at least one object with a mesh and a material")
     scene = Scene()
     for k, spec in enumerate(objects):
         where = f"{path} [[objects]] #{k + 1}"
-        _only(spec, _OBJECT_KEYS, where)
-        for key in ("mesh", "material"):
-            if key not in spec:
-                raise ConfigError(f"{where}: missing '{key}'")
-        scene.add(
-            _mesh(spec["mesh"], path.parent, where),
-            spec["material"],
-            name=spec.get("name"),
-            label=spec.get("label"),
-            priority=spec.get("priority", 0),
-            unit_scale=spec.get("unit_scale", 1.0),
-            transform=_placement(spec, where),
-        )
+        if not isinstance(spec, dict):
+            raise ConfigError(f"{where}: must be a table ([[objects]]), got {spec!r}")
+        _add_object(scene, spec, path.parent, where)
     return SceneFile(path, geometry, scene)
+
+
+def _add_object(scene: Scene, spec: dict, base: Path, where: str) -> None:
+    name = spec.get("name")
+    if name is not None:
+        if not isinstance(name, str) or not name:
+            raise ConfigError(f"{where}: name must be a non-empty string, got {name!r}")
+        where = f"{where} ({name})"
+    _only(spec, _OBJECT_KEYS, where)
+    mesh, material = _required(spec, "mesh", where), _required(spec, "material", where)
+    if isinstance(material, (list, dict)):
+        raise ConfigError(f"{where}: material must be a name (a string), got {material!r}")
+    label = spec.get("label")
+    scene.add(
+        _mesh(mesh, base, where),
+        material,
+        name=name,
+        label=None if label is None else _integer(label, "label", where, 1, 65535),
+        priority=_number(spec.get("priority", 0), "priority", where),
+        unit_scale=_number(spec.get("unit_scale", 1.0), "unit_scale", where, positive=True),
+        transform=_placement(spec, where),
+    )
+
+
+# ----------------------------------------------------------------------------- value checks
+# Each takes the value, the field's name and the place for the message, and returns the checked value.
 
 
 def _only(table: dict, allowed: set, where: str) -> None:
@@ -72,63 +95,130 @@ def _only(table: dict, allowed: set, where: str) -> None:
         raise ConfigError(f"{where}: unknown key(s) {', '.join(unknown)}; allowed: {', '.join(sorted(allowed))}")
 
 
-def _geometry(g: dict, where: str):
-    _only(g, _GEOMETRY_KEYS, where)
-    if "angles_deg" in g and "num_views" in g:
-        raise ConfigError(f"{where}: give either 'num_views' (full circle) or 'angles_deg', not both")
-    start = math.radians(g.get("start_angle_deg", 0.0))
-    if "angles_deg" in g:
-        angles = [math.radians(a) for a in g["angles_deg"]]
-    else:
-        angles = full_circle(g.get("num_views", 1), start)
-    beam = g.get("beam", "cone")
-    common = dict(
-        detector_shape=_required(g, "detector_shape", where),
-        pixel_size=_required(g, "pixel_size", where),
-        angles=angles,
-        detector_offset=g.get("detector_offset", (0.0, 0.0)),
-    )
-    if beam == "cone":
-        return ConeBeamGeometry(_required(g, "source_to_origin", where), _required(g, "source_to_detector", where), **common)
-    if beam == "parallel":
-        return ParallelBeamGeometry(**common)
-    raise ConfigError(f"{where}: beam must be 'cone' or 'parallel', got {beam!r}")
-
-
 def _required(table: dict, key: str, where: str):
     if key not in table:
         raise ConfigError(f"{where}: missing '{key}'")
     return table[key]
 
 
+def _number(value, field: str, where: str, *, positive: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ConfigError(f"{where}: {field} must be a number, got {value!r}")
+    if not math.isfinite(value):
+        raise ConfigError(f"{where}: {field} must be finite, got {value!r}")
+    if positive and value <= 0:
+        raise ConfigError(f"{where}: {field} must be > 0, got {value!r}")
+    return float(value)
+
+
+def _integer(value, field: str, where: str, lo: int, hi: int | None = None) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < lo or (hi is not None and value > hi):
+        bounds = f">= {lo}" if hi is None else f"in [{lo}, {hi}]"
+        raise ConfigError(f"{where}: {field} must be an integer {bounds}, got {value!r}")
+    return value
+
+
+def _vector(value, field: str, where: str, length: int | None, form: str, *, element=_number, **limits) -> tuple:
+    """An array of exactly ``length`` values (any non-empty array if None), each checked by ``element``."""
+    if not isinstance(value, list) or not value or (length is not None and len(value) != length):
+        raise ConfigError(f"{where}: {field} must be {form}, got {value!r}")
+    return tuple(element(x, f"{field}[{i}]", where, **limits) for i, x in enumerate(value))
+
+
+def _one_or_pair(value, field: str, where: str, form: str, *, element=_number, **limits):
+    """One value (meaning both) or a ``[row, col]`` array of two."""
+    if isinstance(value, list):
+        return _vector(value, field, where, 2, form, element=element, **limits)
+    return element(value, field, where, **limits)
+
+
+# ----------------------------------------------------------------------------- tables
+
+
+def _geometry(g: dict, where: str):
+    _only(g, _GEOMETRY_KEYS, where)
+    beam = g.get("beam", "cone")
+    if beam not in ("cone", "parallel"):
+        raise ConfigError(f"{where}: beam must be 'cone' or 'parallel', got {beam!r}")
+    if beam == "parallel":
+        for key in ("source_to_origin", "source_to_detector"):
+            if key in g:
+                raise ConfigError(
+                    f"{where}: '{key}' has no meaning for beam = 'parallel' (there is no source point); "
+                    f"drop it, or set beam = 'cone'"
+                )
+    if "angles_deg" in g:
+        if "num_views" in g:
+            raise ConfigError(f"{where}: give either 'num_views' (full circle) or 'angles_deg', not both")
+        if "start_angle_deg" in g:
+            raise ConfigError(
+                f"{where}: 'start_angle_deg' only applies to 'num_views', not to 'angles_deg'; "
+                "drop 'start_angle_deg' and add it to the angles in 'angles_deg'"
+            )
+        degrees = _vector(g["angles_deg"], "angles_deg", where, None, "a non-empty array of angles in degrees")
+        angles = [math.radians(a) for a in degrees]
+    else:
+        start = _number(g.get("start_angle_deg", 0.0), "start_angle_deg", where)
+        angles = full_circle(_integer(g.get("num_views", 1), "num_views", where, 1), math.radians(start))
+    common = dict(
+        detector_shape=_one_or_pair(
+            _required(g, "detector_shape", where), "detector_shape", where, "an integer or [rows, cols]",
+            element=_integer, lo=1,
+        ),
+        pixel_size=_one_or_pair(
+            _required(g, "pixel_size", where), "pixel_size", where, "a number or [row, col] in mm", positive=True
+        ),
+        angles=angles,
+        detector_offset=_one_or_pair(
+            g.get("detector_offset", 0.0), "detector_offset", where, "a number or [row, col] in mm"
+        ),
+    )
+    if beam == "parallel":
+        return ParallelBeamGeometry(**common)
+    return ConeBeamGeometry(
+        _number(_required(g, "source_to_origin", where), "source_to_origin", where, positive=True),
+        _number(_required(g, "source_to_detector", where), "source_to_detector", where, positive=True),
+        **common,
+    )
+
+
 def _mesh(spec, base: Path, where: str):
-    if isinstance(spec, str):
+    if isinstance(spec, str) and spec:
         return base / spec
     if not isinstance(spec, dict):
-        raise ConfigError(f"{where}: mesh must be a file path or a primitive table like {{ box = [10, 10, 10] }}")
+        raise ConfigError(
+            f"{where}: mesh must be a file path or a primitive table like {{ box = [10, 10, 10] }}, got {spec!r}"
+        )
     import trimesh
 
-    kinds = {"box", "sphere", "cylinder"} & set(spec)
+    where = f"{where} mesh"
+    kinds = set(_PRIMITIVE_KEYS) & set(spec)
     if len(kinds) != 1:
+        _only(spec, set().union(*_PRIMITIVE_KEYS.values()), where)
         raise ConfigError(f"{where}: a mesh primitive needs exactly one of box, sphere, cylinder")
     kind = kinds.pop()
+    _only(spec, _PRIMITIVE_KEYS[kind], where)
     if kind == "box":
-        _only(spec, {"box"}, f"{where} mesh")
-        return trimesh.creation.box(spec["box"])
+        extents = _vector(spec["box"], "box", where, 3, "[x, y, z] edge lengths in mm", positive=True)
+        return trimesh.creation.box(extents)
     if kind == "sphere":
-        _only(spec, {"sphere", "subdivisions"}, f"{where} mesh")
-        return trimesh.creation.icosphere(subdivisions=spec.get("subdivisions", 4), radius=spec["sphere"])
-    _only(spec, {"cylinder", "height", "sections"}, f"{where} mesh")
-    return trimesh.creation.cylinder(radius=spec["cylinder"], height=_required(spec, "height", where), sections=spec.get("sections", 64))
+        return trimesh.creation.icosphere(
+            subdivisions=_integer(spec.get("subdivisions", 4), "subdivisions", where, 0, _MAX_SUBDIVISIONS),
+            radius=_number(spec["sphere"], "sphere", where, positive=True),
+        )
+    return trimesh.creation.cylinder(
+        radius=_number(spec["cylinder"], "cylinder", where, positive=True),
+        height=_number(_required(spec, "height", where), "height", where, positive=True),
+        sections=_integer(spec.get("sections", 64), "sections", where, 3, _MAX_SECTIONS),
+    )
 
 
 def _placement(spec: dict, where: str) -> Transform | None:
     if "translate" not in spec and "rotate_deg" not in spec:
         return None
+    rotate = _vector(spec.get("rotate_deg", [0, 0, 0]), "rotate_deg", where, 3, "[x, y, z] in degrees")
+    offset = _vector(spec.get("translate", [0, 0, 0]), "translate", where, 3, "[x, y, z] in mm")
     t = Transform()
-    for axis, angle in zip(np.eye(3), spec.get("rotate_deg", (0.0, 0.0, 0.0))):
+    for axis, angle in zip(np.eye(3), rotate):
         t = Transform.rotation(axis, math.radians(angle)) @ t  # about x, then y, then z
-    offset = spec.get("translate", (0.0, 0.0, 0.0))
-    if len(offset) != 3:
-        raise ConfigError(f"{where}: translate must be [x, y, z] in mm")
     return Transform.translation(offset) @ t

@@ -10,14 +10,29 @@ from pathlib import Path
 import numpy as np
 
 
+def _read_umask() -> int:
+    """The process umask. Reading it means setting it, so this is done once, at import."""
+    umask = os.umask(0)
+    os.umask(umask)
+    return umask
+
+
+# The mode that open(path, "w") gives a new file; mkstemp's temporaries are private (0600).
+NEW_FILE_MODE = 0o666 & ~_read_umask()
+
+
 def atomic_write(path, write) -> Path:
-    """Call ``write(tmp_path)`` on a temporary file beside ``path``, then rename it into place."""
+    """Call ``write(tmp_path)`` on a temporary file beside ``path``, then rename it into place.
+
+    The file gets the mode of a newly created file, :data:`NEW_FILE_MODE`.
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=path.suffix)
     os.close(fd)
     try:
         write(tmp)
+        os.chmod(tmp, NEW_FILE_MODE)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
@@ -46,9 +61,14 @@ def read_tiff_info(path) -> dict:
 
 
 def write_quicklook(path, image: np.ndarray) -> Path:
-    """8-bit PNG scaled from 0 to the image maximum (a quick look, not data)."""
+    """8-bit PNG scaled from 0 to the image maximum (a quick look, not data).
+
+    Shown as a person expects: +z up. Array row 0 is the lowest detector row (docs/geometry.md),
+    so the rows are flipped for the picture; the TIFF keeps the array order.
+    """
     from PIL import Image
 
     peak = float(image.max())
     scaled = np.zeros(image.shape, np.uint8) if peak <= 0 else np.round(255 * np.clip(image / peak, 0, 1)).astype(np.uint8)
+    scaled = np.ascontiguousarray(scaled[::-1])
     return atomic_write(path, lambda tmp: Image.fromarray(scaled).save(tmp, format="PNG"))
