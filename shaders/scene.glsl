@@ -1,8 +1,9 @@
 // Shared by the crossing stages: the scene's triangles (uploaded once, positions relative to
 // the scene reference point) and the pixel box a triangle's projection can cover.
 
-layout(std430, binding = 0) readonly buffer Vertices { vec4 vertices[]; };       // xyz mm, w unused
-layout(std430, binding = 1) readonly buffer Faces { uvec4 faces[]; };            // a, b, c, object
+// Three corners per triangle (xyz mm; the first corner's w holds the object number's bits):
+// a triangle soup, read in order, costs less than indexed vertices gathered at random.
+layout(std430, binding = 0) readonly buffer Triangles { vec4 corners[]; };
 layout(std430, binding = 2) readonly buffer Objects { uvec4 objects[]; };        // channel, active, container channel + 1, -
 
 uniform mat3x4 u_world_to_pixel;  // transposed 3x4: h = P (x - ref, 1); c' = h.x/h.z, r' = h.y/h.z
@@ -13,8 +14,8 @@ struct Triangle { vec3 a; vec3 b; vec3 c; uint object; };
 
 // Objects are numbered by rank (priority, then insertion), so `object` also orders ownership.
 Triangle fetch_triangle(uint index) {
-    uvec4 f = faces[index];
-    return Triangle(vertices[f.x].xyz, vertices[f.y].xyz, vertices[f.z].xyz, f.w);
+    vec4 a = corners[3u * index];
+    return Triangle(a.xyz, corners[3u * index + 1u].xyz, corners[3u * index + 2u].xyz, floatBitsToUint(a.w));
 }
 
 vec2 to_window(vec3 x) {

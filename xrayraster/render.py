@@ -64,14 +64,13 @@ class _SceneBuffers:
     """A scene uploaded once (vertices relative to ``ref``) and reused for every view.
 
     Objects are numbered by rank (priority, then insertion), so the overlap pass can compare
-    owners by index; every face carries its object's number.
+    owners by index; every triangle carries its object's number.
     """
 
     scene: Scene
     revision: int
     ref: np.ndarray
-    vertices: moderngl.Buffer  # vec4 per vertex (xyz mm relative to ref)
-    faces: moderngl.Buffer  # uvec4 per face: a, b, c, object
+    triangles: moderngl.Buffer  # 3 vec4 per triangle: corners (mm, relative to ref), object in w
     objects: moderngl.Buffer  # uvec4 per object: channel, drawn in this view, container channel + 1
     large: moderngl.Buffer  # indirect draw command + indices of the triangles pass 2 draws
     large_corners: moderngl.Buffer  # the six window-space corners pass 2 draws for each
@@ -83,7 +82,7 @@ class _SceneBuffers:
     corners: np.ndarray  # (8, 3) bounding-box corners relative to ref
 
     def release(self) -> None:
-        for buffer in (self.vertices, self.faces, self.objects, self.large, self.large_corners):
+        for buffer in (self.triangles, self.objects, self.large, self.large_corners):
             buffer.release()
 
 
@@ -219,16 +218,13 @@ class Renderer:
         ref = bounds.mean(axis=0)
         materials = scene.materials
         ranked = sorted(scene.objects, key=lambda o: o.rank)
-        verts, faces, base = [], [], 0
+        soups = []
         for number, o in enumerate(ranked):
-            v = np.zeros((len(o.mesh.vertices), 4), np.float32)
-            v[:, :3] = o.mesh.vertices - ref
-            f = np.full((len(o.mesh.faces), 4), number, np.uint32)
-            f[:, :3] = o.mesh.faces + base
-            verts.append(v)
-            faces.append(f)
-            base += len(v)
-        num_triangles = sum(len(f) for f in faces)
+            soup = np.zeros((len(o.mesh.faces), 3, 4), np.float32)
+            soup[:, :, :3] = (o.mesh.vertices - ref).astype(np.float32)[o.mesh.faces]
+            soup[:, 0, 3] = np.array(number, np.uint32).view(np.float32)
+            soups.append(soup)
+        num_triangles = sum(len(t) for t in soups)
         # Fixed point: the largest total (one bounding-box diagonal) must stay below 2^31 units.
         diagonal = float(np.linalg.norm(bounds[1] - bounds[0]))
         fixed_scale = 2.0 ** np.floor(np.log2(2.0**30 / diagonal))
@@ -238,8 +234,7 @@ class Renderer:
             scene=scene,
             revision=scene.revision,
             ref=ref,
-            vertices=ctx.buffer(np.concatenate(verts).tobytes()),
-            faces=ctx.buffer(np.concatenate(faces).tobytes()),
+            triangles=ctx.buffer(np.concatenate(soups).tobytes()),
             objects=ctx.buffer(reserve=16 * len(ranked)),
             large=ctx.buffer(reserve=4 * (4 + num_triangles)),
             large_corners=ctx.buffer(reserve=6 * 8 * num_triangles),
@@ -318,7 +313,7 @@ class Renderer:
         }
         for prog in (small, large):
             _set_uniforms(prog, uniforms)
-        for binding, buffer in enumerate((buffers.vertices, buffers.faces, buffers.objects, buffers.large)):
+        for binding, buffer in ((0, buffers.triangles), (2, buffers.objects), (3, buffers.large)):
             buffer.bind_to_storage_buffer(binding)
         buffers.large_corners.bind_to_storage_buffer(7)
         buffers.large.write(np.array([0, 1, 0, 0], np.uint32).tobytes())  # empty draw command
