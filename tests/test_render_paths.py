@@ -31,6 +31,13 @@ def convex_scene(rng):
     return placed
 
 
+def one_material_scene(seed) -> xr.Scene:
+    scene = xr.Scene()
+    for m in convex_scene(np.random.default_rng(seed)):
+        scene.add(m, "m")
+    return scene
+
+
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_both_paths_are_exact_on_convex_meshes(gl, seed):
     rng = np.random.default_rng(seed)
@@ -77,10 +84,7 @@ def test_needles_at_every_orientation(gl, split):
 
 def test_sums_are_deterministic(gl):
     """Fixed-point accumulation: the same view renders to the same bytes every time."""
-    rng = np.random.default_rng(5)
-    scene = xr.Scene()
-    for m in convex_scene(rng):
-        scene.add(m, "m")
+    scene = one_material_scene(5)
     geom = xr.ConeBeamGeometry(40.0, 100.0, (N, N), 0.2, [0.4])
     with xr.Renderer(geom, context=gl) as r:
         first = r.path_lengths(scene).tobytes()
@@ -110,10 +114,7 @@ def test_bad_split_is_refused(gl):
 
 def test_triangle_pass_spans_two_dispatch_dimensions(gl):
     """Scenes beyond 65535 × 64 triangles need a 2-D dispatch; force it with a tiny row limit."""
-    rng = np.random.default_rng(2)
-    scene = xr.Scene()
-    for m in convex_scene(rng):
-        scene.add(m, "m")
+    scene = one_material_scene(2)
     geom = xr.ConeBeamGeometry(40.0, 100.0, (N, N), 0.2, [0.2])
     with xr.Renderer(geom, context=gl) as r:
         want = r.path_lengths(scene)
