@@ -65,6 +65,8 @@ def workdir(tmp_path, monkeypatch):
 
 @pytest.mark.parametrize("doc, line, code, expect", _params(PYTHON))
 def test_python_block_runs(doc, line, code, expect, workdir, request):
+    """Each example runs and checks its own result: a block without an assert shows, not proves."""
+    assert re.search(r"^\s*assert ", code, re.MULTILINE), f"{doc.name}:{line}: the example asserts nothing"
     if NEEDS_GL.search(code):
         request.getfixturevalue("gl")  # skip (or fail under XRAYRASTER_REQUIRE_GL=1) without OpenGL
     # Pad so that a traceback's line numbers are the markdown file's.
