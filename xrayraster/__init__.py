@@ -1,27 +1,39 @@
 """xrayraster: X-ray CT simulation from triangle meshes (see README.md and DESIGN.md)."""
 
+from .detector import Detector
 from .geometry import ConeBeamGeometry, GeometryError, ParallelBeamGeometry, VectorGeometry, VolumeGeometry, full_circle
 from .glcontext import GLContext, GLContextError
+from .materials import Material, MaterialError
 from .mesh import Mesh, MeshError, load_mesh
+from .physics import PhysicsError
+from .radiograph import Radiograph
 from .render import RenderError, Renderer
 from .scene import Scene, SceneError, SceneObject
+from .spectrum import Spectrum, SpectrumError
 from .transform import Transform
 
 __version__ = "0.1.0"
 
 __all__ = [
     "ConeBeamGeometry",
+    "Detector",
     "GLContext",
     "GLContextError",
     "GeometryError",
+    "Material",
+    "MaterialError",
     "Mesh",
     "MeshError",
     "ParallelBeamGeometry",
+    "PhysicsError",
+    "Radiograph",
     "RenderError",
     "Renderer",
     "Scene",
     "SceneError",
     "SceneObject",
+    "Spectrum",
+    "SpectrumError",
     "Transform",
     "VectorGeometry",
     "VolumeGeometry",

@@ -43,7 +43,10 @@ import moderngl
 import numpy as np
 
 from .geometry import VectorGeometry, as_vector_geometry
+from .detector import Detector
 from .glcontext import GLContext
+from .physics import pixel_photon_factor
+from .radiograph import radiograph
 from .raysetup import view_rays
 from .scene import Scene, SceneError
 
@@ -166,6 +169,23 @@ class Renderer:
             out = out.reshape(c, r // k, k, q // k, k).mean(axis=(2, 4), dtype=np.float64).astype(np.float32)
         np.maximum(out, 0.0, out=out)
         return out
+
+    def project(self, scene: Scene, spectrum, view: int = 0, *, detector=None, output: str = "lineint",
+                noise: bool = False, seed: int | None = None):
+        """The radiograph of one view (:class:`~xrayraster.radiograph.Radiograph`).
+
+        Scene materials must be :class:`~xrayraster.Material` objects. ``output``: ``"raw"``
+        (detector signal), ``"transmission"`` or ``"lineint"`` (−ln of it). With ``noise``,
+        quantum and electronic noise are drawn from a generator seeded by ``(seed, view)``:
+        the same seed gives the same bytes, and every view its own independent stream.
+        """
+        if noise and seed is None:
+            raise RenderError("noise=True needs a seed (an int), so the noise is reproducible")
+        lengths = self.path_lengths(scene, view)
+        view %= self._vec.num_views
+        rng = np.random.default_rng([int(seed), view]) if noise else None
+        factor = pixel_photon_factor(self._vec, view)
+        return radiograph(lengths, scene.materials, spectrum, detector or Detector(), factor, output=output, noise=noise, rng=rng)
 
     def release(self) -> None:
         if self.gl is None:

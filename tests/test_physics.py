@@ -1,0 +1,131 @@
+"""Spectral Beer–Lambert, noise and normalisation against float64 references and Poisson statistics."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import xrayraster as xr
+from xrayraster import physics
+
+ENERGIES = np.arange(15.0, 80.0, 1.0)  # keV
+PHOTONS = np.exp(-0.5 * ((ENERGIES - 40.0) / 12.0) ** 2) * 1e3  # photons per mm² at 1 m per bin
+
+
+def mu_like(scale: float) -> np.ndarray:
+    """A photoelectric-plus-scatter shape, mm⁻¹: falls steeply with energy, like real materials."""
+    return scale * (0.02 + 8000.0 / ENERGIES**3)
+
+
+def reference_signal(lengths, mu, photons, weights, factor):
+    """Pixel-by-pixel, bin-by-bin float64 sum: the definition, written out."""
+    c, rows, cols = lengths.shape
+    out = np.zeros((rows, cols))
+    for i in range(rows):
+        for j in range(cols):
+            for b in range(len(photons)):
+                out[i, j] += weights[b] * photons[b] * factor[i, j] * np.exp(-sum(mu[k, b] * float(lengths[k, i, j]) for k in range(c)))
+    return out
+
+
+def test_monochromatic_line_integral_is_mu_times_length():
+    rng = np.random.default_rng(1)
+    lengths = rng.uniform(0, 30, (2, 40, 50)).astype(np.float32)
+    mu = np.array([[0.05], [0.3]])
+    factor = np.ones((40, 50))
+    signal = physics.expected_signal(lengths, mu, [1e4], [30.0], factor)
+    flat = physics.expected_signal(np.zeros_like(lengths), mu, [1e4], [30.0], factor)
+    got = physics.normalise(signal, flat, 0.0, floor=1e-300).line_integral
+    want = np.tensordot(mu[:, 0], lengths.astype(np.float64), axes=1)
+    assert np.abs(got - want).max() <= 1e-6 * want.max()
+
+
+@pytest.mark.parametrize("channels", [1, 3])
+def test_polychromatic_transmission_equals_the_float64_definition(channels):
+    rng = np.random.default_rng(channels)
+    lengths = rng.uniform(0, 8, (channels, 12, 9)).astype(np.float32)
+    mu = np.stack([mu_like(s) for s in (1.0, 2.7, 0.4)[:channels]])
+    factor = rng.uniform(0.5, 1.0, (12, 9))
+    weights = ENERGIES * 0.8
+    got = physics.expected_signal(lengths, mu, PHOTONS, weights, factor)
+    want = reference_signal(lengths, mu, PHOTONS, weights, factor)
+    np.testing.assert_allclose(got, want, rtol=1e-10)
+    flat = physics.expected_signal(np.zeros_like(lengths), mu, PHOTONS, weights, factor)
+    want_t = want / reference_signal(np.zeros_like(lengths), mu, PHOTONS, weights, factor)
+    np.testing.assert_allclose(physics.normalise(got, flat, 0.0, 1e-300).transmission, want_t, rtol=1e-5)
+
+
+def test_photon_factor_follows_inverse_square_and_obliquity():
+    geom = xr.ConeBeamGeometry(500.0, 1000.0, (5, 7), 40.0, [0.3])
+    factor = physics.pixel_photon_factor(geom, 0)
+    area = 40.0**2
+    # Centre pixel: on the axis, 1 m from the source.
+    assert factor[2, 3] == pytest.approx(area, rel=1e-12)
+    # Corner pixel: offsets (2, 3) pixels: distance r, cos = 1000 / r.
+    r = np.sqrt(1000.0**2 + (2 * 40.0) ** 2 + (3 * 40.0) ** 2)
+    assert factor[0, 0] == pytest.approx(area * (1000.0 / r) * (1000.0 / r) ** 2, rel=1e-12)
+    parallel = physics.pixel_photon_factor(xr.ParallelBeamGeometry((3, 4), 0.5, [1.0]), 0)
+    np.testing.assert_allclose(parallel, 0.25)
+
+
+@pytest.mark.parametrize("counting", [True, False])
+def test_noise_mean_and_variance_match_poisson(counting):
+    """10⁵ pixels with the same expected photons: sample mean and variance against the exact
+    compound-Poisson moments, within 5 standard errors computed from n."""
+    n = 100_000
+    lengths = np.full((1, 250, 400), 3.0, np.float32)
+    mu = mu_like(1.0)[None]
+    photons = PHOTONS * 0.05
+    efficiency = np.linspace(0.9, 0.6, len(ENERGIES))
+    detected = photons * efficiency * np.exp(-mu[0] * 3.0)  # per bin, per pixel
+    w = np.ones_like(ENERGIES) if counting else ENERGIES
+    mean, var = (w * detected).sum(), (w**2 * detected).sum()
+    fourth = (w**4 * detected).sum() + 3 * var**2  # 4th central moment of a compound Poisson sum
+    sample = physics.sampled_signal(lengths, mu, photons, efficiency, ENERGIES, 1.0, counting, np.random.default_rng(7))
+    assert sample.size == n
+    assert abs(sample.mean() - mean) <= 5 * np.sqrt(var / n)
+    assert abs(sample.var(ddof=1) - var) <= 5 * np.sqrt((fourth - var**2) / n)
+    if counting:
+        assert np.all(sample == np.round(sample))
+
+
+def test_same_seed_same_bytes_and_different_seeds_differ():
+    lengths = np.random.default_rng(0).uniform(0, 5, (2, 30, 30)).astype(np.float32)
+    mu = np.stack([mu_like(1.0), mu_like(2.0)])
+    args = (lengths, mu, PHOTONS, np.ones_like(ENERGIES), ENERGIES, 1.0, False)
+    a = physics.sampled_signal(*args, np.random.default_rng(42))
+    b = physics.sampled_signal(*args, np.random.default_rng(42))
+    c = physics.sampled_signal(*args, np.random.default_rng(43))
+    assert a.tobytes() == b.tobytes() and a.tobytes() != c.tobytes()
+
+
+def test_beam_hardening_effective_mu_falls_with_thickness():
+    """A step wedge: μ_eff = −ln(T)/t falls with t, exactly as the float64 definition says."""
+    steps = np.array([0.5, 1, 2, 4, 8, 16, 32.0])
+    lengths = steps[None, None, :].astype(np.float32)
+    mu = mu_like(1.0)[None]
+    w = ENERGIES
+    signal = physics.expected_signal(lengths, mu, PHOTONS, w, np.ones((1, len(steps))))
+    flat = (PHOTONS * w).sum()
+    mu_eff = -np.log(signal[0] / flat) / steps
+    want = np.array([-np.log((PHOTONS * w * np.exp(-mu[0] * t)).sum() / flat) / t for t in steps])
+    np.testing.assert_allclose(mu_eff, want, rtol=1e-10)
+    assert np.all(np.diff(mu_eff) < 0)
+    assert mu_eff[0] / mu_eff[-1] > 1.5  # visibly harder
+
+
+def test_starved_pixels_are_clamped_and_counted():
+    raw = np.array([[5.0, 0.0, -2.0, 1.0]])
+    out = physics.normalise(raw, np.full((1, 4), 10.0), 1.0, floor=0.5)
+    assert out.starved == 3  # 0, -2 and 1 are all at or below the dark level 1
+    np.testing.assert_allclose(out.transmission, [[4 / 9, 0.5 / 9, 0.5 / 9, 0.5 / 9]])
+    assert np.all(np.isfinite(out.line_integral))
+
+
+def test_bad_shapes_and_flat_are_refused():
+    with pytest.raises(physics.PhysicsError, match="mu must be"):
+        physics.expected_signal(np.zeros((2, 3, 3)), np.zeros((1, 4)), np.ones(4), np.ones(4), 1.0)
+    with pytest.raises(physics.PhysicsError, match="photons must have one value per energy bin"):
+        physics.expected_signal(np.zeros((1, 3, 3)), np.zeros((1, 4)), np.ones(3), np.ones(4), 1.0)
+    with pytest.raises(physics.PhysicsError, match="flat field is not above the dark"):
+        physics.normalise(np.ones((2, 2)), np.ones((2, 2)), 1.0, 0.5)
