@@ -68,24 +68,27 @@ def test_photon_factor_follows_inverse_square_and_obliquity():
     np.testing.assert_allclose(parallel, 0.25)
 
 
-@pytest.mark.parametrize("counting", [True, False])
-def test_noise_mean_and_variance_match_poisson(counting):
+@pytest.mark.parametrize("counting, scale", [(True, 0.05), (False, 0.05), (False, 20.0)])
+def test_noise_mean_and_variance_match_poisson(counting, scale):
     """10⁵ pixels with the same expected photons: sample mean and variance against the exact
-    compound-Poisson moments, within 5 standard errors computed from n."""
+    compound-Poisson moments, within 5 standard errors computed from n. Scale 0.05: ~100
+    photons per pixel (drawn bin by bin); 20: ~40 000 (the moment-exact Gaussian)."""
     n = 100_000
     lengths = np.full((1, 250, 400), 3.0, np.float32)
     mu = mu_like(1.0)[None]
-    photons = PHOTONS * 0.05
+    photons = PHOTONS * scale
     efficiency = np.linspace(0.9, 0.6, len(ENERGIES))
     detected = photons * efficiency * np.exp(-mu[0] * 3.0)  # per bin, per pixel
     w = np.ones_like(ENERGIES) if counting else ENERGIES
     mean, var = (w * detected).sum(), (w**2 * detected).sum()
     fourth = (w**4 * detected).sum() + 3 * var**2  # 4th central moment of a compound Poisson sum
+    exact = detected.sum() < physics.EXACT_BELOW_PHOTONS
+    assert exact == (scale < 1) or counting
     sample = physics.sampled_signal(lengths, mu, photons, efficiency, ENERGIES, 1.0, counting, np.random.default_rng(7))
     assert sample.size == n
     assert abs(sample.mean() - mean) <= 5 * np.sqrt(var / n)
     assert abs(sample.var(ddof=1) - var) <= 5 * np.sqrt((fourth - var**2) / n)
-    if counting:
+    if counting or exact:  # whole photons (of whole-keV energies here)
         assert np.all(sample == np.round(sample))
 
 
