@@ -183,3 +183,145 @@ def test_a_failed_write_leaves_the_old_file_and_no_temporary(tmp_path, monkeypat
         cli.main(["render", str(EXAMPLE), "-o", str(out), "--path-lengths"])
     assert out.read_bytes() == b"previous result"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["result.tif"]
+
+
+# --------------------------------------------------------------------------- radiographs (no --path-lengths)
+
+
+@pytest.fixture(scope="module")
+def loaded_example():
+    return load_scene_file(EXAMPLE)
+
+
+@pytest.fixture(scope="module", params=["lineint", "transmission", "raw"])
+def radiograph_run(request, tmp_path_factory, gl, loaded_example):
+    """``xrayraster render EXAMPLE -o OUT --views all --output KIND`` in-process, and Renderer.project on the same scene."""
+    output = request.param
+    out = tmp_path_factory.mktemp(f"radio_{output}") / "bracket.tif"
+    assert cli.main(["render", str(EXAMPLE), "-o", str(out), "--views", "all", "--output", output]) == 0
+    with xr.Renderer(loaded_example.geometry, context=gl) as renderer:
+        shots = [renderer.project(loaded_example.scene, loaded_example.spectrum, v, detector=loaded_example.detector,
+                                  output=output) for v in range(4)]
+    return output, out, shots
+
+
+def test_radiograph_tiff_is_float32_views_by_rows_by_cols_equal_to_project(radiograph_run):
+    output, out, shots = radiograph_run
+    with tifffile.TiffFile(out) as tif:
+        data = tif.asarray()
+        assert tif.series[0].axes == "TYX"
+    assert data.dtype == np.float32 and data.shape == (4, 256, 320)
+    np.testing.assert_array_equal(data, np.stack([s.image for s in shots]))
+    if output == "lineint":
+        assert data.max() > 3 and abs(data.min()) < 1e-6  # steel ball; open beam
+    elif output == "transmission":
+        assert data.max() == pytest.approx(1.0) and 0 < data.min() < 0.05
+    assert sorted(p.name for p in out.parent.iterdir()) == ["bracket.png", "bracket.tif"]
+
+
+def test_radiograph_metadata_describes_the_physics(radiograph_run, loaded_example):
+    output, out, shots = radiograph_run
+    info = read_tiff_info(out)
+    assert info["output"] == output
+    assert info["units"] == {"raw": "keV deposited", "transmission": "1", "lineint": "1"}[output]
+    assert info["axes"] == "view, row, col"
+    assert info["materials"] == ["aluminium", "steel"]
+    assert info["views"] == [0, 1, 2, 3]
+    assert info["spectrum"] == loaded_example.spectrum.description and "80 kVp" in info["spectrum"]
+    assert eval(info["detector"], vars(xr)) == loaded_example.detector
+    assert info["bins_used"] == [s.bins for s in shots] and 0 < info["bins_used"][0] <= loaded_example.spectrum.n_bins
+    assert info["starved_pixels"] == [s.starved for s in shots] == [0, 0, 0, 0]
+    assert info["noise"] is False and info["seed"] is None
+    assert eval(info["geometry"], vars(xr)) == loaded_example.geometry
+
+
+def test_radiograph_png_is_view_0_with_z_up(radiograph_run):
+    _, out, shots = radiograph_run
+    with Image.open(out.with_suffix(".png")) as image:
+        pixels = np.asarray(image)
+    view0 = shots[0].image.astype(np.float64)[::-1]
+    expected = np.round(255 * np.clip(view0 / view0.max(), 0, 1)).astype(np.uint8)
+    assert pixels.shape == (256, 320) and np.abs(pixels.astype(int) - expected).max() <= 1
+
+
+def test_the_summary_line(tmp_path, capsys, gl):
+    out = tmp_path / "b.tif"
+    assert cli.main(["render", str(EXAMPLE), "-o", str(out), "--views", "1,2"]) == 0
+    line = capsys.readouterr().out
+    assert line.startswith(f"{out}: 2 view(s) × 256×320 px lineint radiograph [1], range ")
+    assert "energy bins" in line and "starved" not in line and f"quick-look {out.with_suffix('.png')}" in line
+
+
+def test_noise_with_a_seed_is_reproducible_to_the_byte(tmp_path, gl, loaded_example):
+    def run(name, *extra):
+        out = tmp_path / name
+        assert cli.main(["render", str(EXAMPLE), "-o", str(out), "--views", "0,2", "--noise", *extra]) == 0
+        return out
+
+    a, b, c, default = run("a.tif", "--seed", "7"), run("b.tif", "--seed", "7"), run("c.tif", "--seed", "8"), run("d.tif")
+    assert a.read_bytes() == b.read_bytes()
+    assert not np.array_equal(tifffile.imread(a), tifffile.imread(c))
+    assert read_tiff_info(a)["seed"] == 7 and read_tiff_info(a)["noise"] is True
+    assert read_tiff_info(default)["seed"] == 0
+    with xr.Renderer(loaded_example.geometry, context=gl) as renderer:
+        expected = [renderer.project(loaded_example.scene, loaded_example.spectrum, v, detector=loaded_example.detector,
+                                     noise=True, seed=7).image for v in (0, 2)]
+    np.testing.assert_array_equal(tifffile.imread(a), np.stack(expected))
+
+
+def test_a_spectrum_file_and_a_counting_detector(tmp_path, gl):
+    xr.Spectrum.from_arrays([40.0, 60.0], [1e5, 2e5]).to_file(tmp_path / "s.txt")
+    scene = tmp_path / "scene.toml"
+    scene.write_text(GEOMETRY + """
+[materials.water]
+formula = "H2O"
+density = 1.0
+
+[source]
+spectrum_file = "s.txt"
+
+[detector]
+mode = "counting"
+
+[[objects]]
+mesh = { box = [5, 5, 5] }
+material = "water"
+""")
+    out = tmp_path / "raw.tif"
+    assert cli.main(["render", str(scene), "-o", str(out), "--output", "raw"]) == 0
+    info = read_tiff_info(out)
+    assert info["units"] == "counts" and info["spectrum"] == "from file s.txt" and info["bins_used"] == [2]
+    assert tifffile.imread(out).shape == (16, 16)  # one view: tifffile squeezes the length-1 view axis on reading
+
+
+RADIOGRAPH_BAD = {
+    "no source": (GEOMETRY + '[materials.a]\nelement = "Al"\n[[objects]]\nmesh = { box = [1, 1, 1] }\nmaterial = "a"\n', [],
+                  r"radiographs need a \[source\] table \(the X-ray spectrum\); add it \(docs/scene-format\.md\), "
+                  r"or pass --path-lengths"),
+    "no materials": (GEOMETRY + "[source]\nkvp = 60\n[[objects]]\nmesh = { box = [1, 1, 1] }\nmaterial = \"a\"\n", [],
+                     r"radiographs need a \[materials\] table"),
+    "neither": (GEOMETRY + '[[objects]]\nmesh = { box = [1, 1, 1] }\nmaterial = "a"\n', [],
+                r"radiographs need a \[source\] table .* and a \[materials\] table .*; add them"),
+    "output with path lengths": (EXAMPLE, ["--path-lengths", "--output", "raw"], r"--output appl\(y/ies\) to radiographs"),
+    "seed without noise": (EXAMPLE, ["--seed", "3"], r"--seed needs --noise"),
+    "bad output kind": (EXAMPLE, ["--output", "counts"], None),
+}
+
+
+@pytest.mark.parametrize("scene, extra, message", RADIOGRAPH_BAD.values(), ids=RADIOGRAPH_BAD.keys())
+def test_radiograph_bad_input_exits_2_and_says_what_to_add(scene, extra, message, tmp_path, capsys):
+    if isinstance(scene, str):
+        path = tmp_path / "scene.toml"
+        path.write_text(scene)
+    else:
+        path = scene
+    out = tmp_path / "out" / "r.tif"
+    if message is None:  # argparse refuses it
+        with pytest.raises(SystemExit) as exc:
+            cli.main(["render", str(path), "-o", str(out), *extra])
+        assert exc.value.code == 2 and "invalid choice: 'counts'" in capsys.readouterr().err
+    else:
+        assert cli.main(["render", str(path), "-o", str(out), *extra]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("xrayraster: error: ") and re.search(message, err), err
+    assert not (tmp_path / "out").exists()

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from xrayraster import cli
+from xrayraster import Detector, Material, Spectrum, cli
 from xrayraster.config import ConfigError, load_scene_file
 from xrayraster.geometry import ConeBeamGeometry, ParallelBeamGeometry
 from xrayraster.io import NEW_FILE_MODE, atomic_write, write_quicklook
@@ -253,7 +253,7 @@ material = "b"
 # ------------------------------------------------------------------ 6. unknown keys everywhere
 
 UNKNOWN = {
-    "top level": ("colour = 1\n" + CONE + BOX, r"scene\.toml: unknown key\(s\) colour; allowed: geometry, objects"),
+    "top level": ("colour = 1\n" + CONE + BOX, r"scene\.toml: unknown key\(s\) colour; allowed: detector, geometry, materials, objects, source$"),
     "geometry": (with_geometry("num_view = 4"), GEOMETRY_AT + r": unknown key\(s\) num_view; allowed: angles_deg, beam, "),
     "geometry subtable": (CONE + "[geometry.detector]\nrows = 4\n" + BOX, GEOMETRY_AT + r": unknown key\(s\) detector; allowed: "),
     "object": (with_object('colour = "red"'), BALL_AT + r": unknown key\(s\) colour; allowed: label, material, mesh, name, "),
@@ -325,7 +325,10 @@ translate = [1, 2, 3]
 
 def test_the_bundled_example_loads(tmp_path):
     loaded = load_scene_file(ROOT / "examples" / "bracket_and_ball.toml")
-    assert loaded.geometry.num_views == 4 and loaded.scene.materials == ("aluminium", "steel")
+    assert loaded.geometry.num_views == 4 and [m.name for m in loaded.scene.materials] == ["aluminium", "steel"]
+    assert loaded.scene.materials == (Material.element("Al"), Material.from_mass_fractions({"Fe": 0.98, "C": 0.02}, 7.85))
+    assert loaded.spectrum == Spectrum.from_tube(80, "W", 12.0, {"Al": 1.0}, mas=5)
+    assert loaded.detector == Detector(scintillator=Material.from_formula("CsI", 4.51), scintillator_mm=0.5)
 
 
 # ------------------------------------------------------------------ 7. output file mode
@@ -361,3 +364,155 @@ def test_output_mode_follows_the_umask_and_leaves_it_unchanged(umask, mode, tmp_
                          capture_output=True, text=True, timeout=120)
     assert run.returncode == 0, run.stderr
     assert run.stdout.split() == [oct(mode), oct(umask)]
+
+
+# ------------------------------------------------------------------ 8. [materials], [source], [detector]
+
+MATS = """
+[materials.a]
+element = "Al"
+
+[materials.b]
+formula = "H2O"
+density = 1.0
+"""
+MONO = """
+[source]
+monochromatic_kev = 60.0
+photons_per_mm2_at_1m = 1e6
+"""
+
+
+def test_materials_become_material_objects_named_by_their_table(tmp_path):
+    loaded = load(tmp_path, CONE + MATS + """
+[materials.c]
+mass_fractions = { C = 0.404, H = 0.481, Cl = 0.019, O = 0.096 }
+density = 1.2
+
+[materials.heavy_al]
+element = "Al"
+density = 3.0
+""" + BALL)
+    a, b = loaded.scene.materials
+    assert (a.name, b.name) == ("a", "b")
+    assert a == Material.element("Al") and a.density == pytest.approx(2.6989)  # xraylib's density
+    assert b == Material.from_formula("H2O", 1.0)
+    assert loaded.materials["c"] == Material.from_mass_fractions({"C": 0.404, "H": 0.481, "Cl": 0.019, "O": 0.096}, 1.2)
+    assert loaded.materials["heavy_al"].density == 3.0
+    assert [o.material for o in loaded.scene.objects] == [a, b]
+    assert loaded.spectrum is None and loaded.detector is None
+
+
+def test_equal_compositions_under_different_names_share_a_channel(tmp_path):
+    loaded = load(tmp_path, CONE + """
+[materials.water]
+formula = "H2O"
+density = 1.0
+
+[materials.tap_water]
+formula = "H2O"
+density = 1.0
+""" + BALL.replace('material = "a"', 'material = "water"').replace('material = "b"', 'material = "tap_water"'))
+    assert len(loaded.scene.materials) == 1 and loaded.scene.materials[0].name == "water"
+    assert loaded.scene.channel(loaded.scene.objects[1]) == 0
+
+
+def test_without_materials_a_material_stays_a_name(tmp_path):
+    loaded = load(tmp_path, CONE + MONO + BALL)
+    assert loaded.scene.materials == ("a", "b") and loaded.materials is None
+    assert loaded.spectrum == Spectrum.monochromatic(60.0, 1e6)
+
+
+def test_source_kinds(tmp_path):
+    tube = load(tmp_path, CONE + MATS + """
+[source]
+kvp = 60
+anode = "W"
+anode_angle_deg = 10
+filters = { Al = 2.0, Cu = 0.1 }
+mas = 2
+bin_kev = 1.0
+""" + BALL).spectrum
+    assert tube == Spectrum.from_tube(60, "W", 10, {"Al": 2.0, "Cu": 0.1}, mas=2, bin_kev=1.0)
+    Spectrum.from_arrays([30.0, 50.0], [10.0, 20.0]).to_file(tmp_path / "spectra" / "s.txt")
+    from_file = load(tmp_path, CONE + MATS + '[source]\nspectrum_file = "spectra/s.txt"\n' + BALL).spectrum
+    assert from_file == Spectrum.from_arrays([30.0, 50.0], [10.0, 20.0])  # relative to the scene file
+
+
+def test_detector_with_every_field(tmp_path):
+    det = load(tmp_path, CONE + MATS + MONO + """
+[detector]
+mode = "counting"
+scintillator = "b"
+scintillator_mm = 0.3
+blur_sigma_px = 0.8
+electronic_noise = 2
+dark = 10
+""" + BALL).detector
+    assert det == Detector("counting", Material.from_formula("H2O", 1.0), 0.3, 0.8, None, 2.0, 10.0)
+    inline = load(tmp_path, CONE + MONO + '[detector]\nscintillator = { formula = "CsI", density = 4.51 }\nscintillator_mm = 0.5\n' + BALL)
+    assert inline.detector == Detector(scintillator=Material.from_formula("CsI", 4.51), scintillator_mm=0.5)
+    assert inline.detector.scintillator.name == "CsI"
+
+
+MAT_AT = r"scene\.toml \[materials\.m\]"
+SRC_AT = r"scene\.toml \[source\]"
+DET_AT = r"scene\.toml \[detector\]"
+PHYSICS_ERRORS = {
+    "undefined material": (CONE + MATS.replace("[materials.b]", "[materials.bb]") + BALL,
+                           BALL_AT + r": material 'b' is not defined in \[materials\] \(defined: a, bb\); add a \[materials\.b\] table"),
+    "materials not a table": ("materials = 3\n" + CONE + BALL, r"scene\.toml: materials must be a table"),
+    "material not a table": (CONE + "[materials]\nm = 3\n" + BALL, MAT_AT + r": must be a table"),
+    "material no kind": (CONE + "[materials.m]\ndensity = 1.0\n" + BOX, MAT_AT + r": give exactly one of element, formula, mass_fractions \(got none\)"),
+    "material two kinds": (CONE + '[materials.m]\nelement = "Al"\nformula = "H2O"\ndensity = 1\n' + BOX,
+                           MAT_AT + r": give exactly one of element, formula, mass_fractions \(got element and formula\)"),
+    "material unknown key": (CONE + '[materials.m]\nelement = "Al"\ncolour = 1\n' + BOX,
+                             MAT_AT + r": unknown key\(s\) colour; allowed: density, element, formula, mass_fractions"),
+    "formula without density": (CONE + '[materials.m]\nformula = "H2O"\n' + BOX, MAT_AT + r": missing 'density'"),
+    "density string": (CONE + '[materials.m]\nformula = "H2O"\ndensity = "1"\n' + BOX, MAT_AT + r": density must be a number, got '1'"),
+    "density zero": (CONE + '[materials.m]\nelement = "Al"\ndensity = 0\n' + BOX, MAT_AT + r": density must be > 0, got 0"),
+    "element number": (CONE + "[materials.m]\nelement = 13\n" + BOX, MAT_AT + r": element must be a non-empty string, got 13"),
+    "unknown element": (CONE + '[materials.m]\nelement = "Xx"\n' + BOX, MAT_AT + r": element: unknown chemical symbol 'Xx'"),
+    "bad formula": (CONE + '[materials.m]\nformula = "H2Oo"\ndensity = 1\n' + BOX, MAT_AT + r": formula: cannot parse 'H2Oo'"),
+    "fractions not a table": (CONE + '[materials.m]\nmass_fractions = [1]\ndensity = 1\n' + BOX, MAT_AT + r": mass_fractions must be a table"),
+    "fraction string": (CONE + '[materials.m]\nmass_fractions = { C = "1" }\ndensity = 1\n' + BOX,
+                        MAT_AT + r": mass_fractions\.C must be a number, got '1'"),
+    "fraction negative": (CONE + '[materials.m]\nmass_fractions = { C = -1, H = 2 }\ndensity = 1\n' + BOX,
+                          MAT_AT + r": mass_fractions\.C must be >= 0, got -1"),
+    "fractions in percent": (CONE + '[materials.m]\nmass_fractions = { C = 40, H = 60 }\ndensity = 1\n' + BOX,
+                             MAT_AT + r": composition: mass fractions sum to 100, not 1"),
+    "source not a table": ("source = 1\n" + CONE + BOX, r"scene\.toml: source must be a table"),
+    "source none": (CONE + "[source]\nmas = 1\n" + BOX, SRC_AT + r": give exactly one source kind: .* \(got none\)"),
+    "source two kinds": (CONE + '[source]\nkvp = 80\nspectrum_file = "s.txt"\n' + BOX, SRC_AT + r": .*\(got kvp and spectrum_file\)"),
+    "source stray key": (CONE + MONO + "mas = 2\n" + BOX, SRC_AT + r": mas do\(es\) not apply to a monochromatic_kev source; allowed with"),
+    "source unknown key": (CONE + "[source]\nkvp = 80\nkv = 80\n" + BOX, SRC_AT + r": unknown key\(s\) kv; allowed: anode, "),
+    "kvp string": (CONE + '[source]\nkvp = "80"\n' + BOX, SRC_AT + r": kvp must be a number, got '80'"),
+    "mas zero": (CONE + "[source]\nkvp = 80\nmas = 0\n" + BOX, SRC_AT + r": mas must be > 0, got 0"),
+    "bad anode": (CONE + '[source]\nkvp = 80\nanode = "Pb"\n' + BOX, SRC_AT + r": anode 'Pb' is not a SpekPy anode"),
+    "filters not a table": (CONE + '[source]\nkvp = 80\nfilters = "Al"\n' + BOX, SRC_AT + r": filters must be a table"),
+    "filter negative": (CONE + "[source]\nkvp = 80\nfilters = { Al = -1 }\n" + BOX, SRC_AT + r": filters\.Al must be >= 0, got -1"),
+    "unknown filter": (CONE + "[source]\nkvp = 80\nfilters = { Unobtainium = 1 }\n" + BOX, SRC_AT + r": filters: 'Unobtainium' is not a SpekPy material"),
+    "mono without photons": (CONE + "[source]\nmonochromatic_kev = 60\n" + BOX, SRC_AT + r": missing 'photons_per_mm2_at_1m'"),
+    "mono out of range": (CONE + "[source]\nmonochromatic_kev = 1000\nphotons_per_mm2_at_1m = 1\n" + BOX,
+                          SRC_AT + r": monochromatic_kev must be in \[0\.1, 800\] keV"),
+    "missing spectrum file": (CONE + '[source]\nspectrum_file = "nope.txt"\n' + BOX, SRC_AT + r": spectrum file '.*nope\.txt' cannot be read"),
+    "detector unknown key": (CONE + "[detector]\nnoise = 1\n" + BOX, DET_AT + r": unknown key\(s\) noise; allowed: blur_sigma_px, dark, "),
+    "detector mode": (CONE + '[detector]\nmode = "photon"\n' + BOX, DET_AT + r": mode must be 'integrating' or 'counting', got 'photon'"),
+    "scintillator undefined": (CONE + '[detector]\nscintillator = "csi"\nscintillator_mm = 1\n' + BOX,
+                               DET_AT + r": scintillator 'csi' is not defined in \[materials\] \(defined: none\)"),
+    "scintillator number": (CONE + "[detector]\nscintillator = 5\n" + BOX, DET_AT + r": scintillator must be a material name"),
+    "scintillator inline bad": (CONE + '[detector]\nscintillator = { formula = "CsI" }\nscintillator_mm = 1\n' + BOX,
+                                DET_AT + r" scintillator: missing 'density'"),
+    "scintillator without thickness": (CONE + MATS + '[detector]\nscintillator = "a"\n' + BOX,
+                                       DET_AT + r": give both scintillator and scintillator_mm > 0, or neither"),
+    "thickness without scintillator": (CONE + "[detector]\nscintillator_mm = 1\n" + BOX, DET_AT + r": give both scintillator"),
+    "blur negative": (CONE + "[detector]\nblur_sigma_px = -1\n" + BOX, DET_AT + r": blur_sigma_px must be >= 0, got -1"),
+    "noise string": (CONE + '[detector]\nelectronic_noise = "2"\n' + BOX, DET_AT + r": electronic_noise must be a number, got '2'"),
+    "dark inf": (CONE + "[detector]\ndark = inf\n" + BOX, DET_AT + r": dark must be finite, got inf"),
+}
+
+
+@pytest.mark.parametrize("text, message", PHYSICS_ERRORS.values(), ids=PHYSICS_ERRORS.keys())
+def test_materials_source_and_detector_errors_name_the_table_and_field(text, message, tmp_path):
+    with pytest.raises(ConfigError, match=message):
+        load(tmp_path, text)
