@@ -248,6 +248,97 @@ def gvxr_path_lengths(meshes_by_material: dict[str, list[tuple[np.ndarray, np.nd
     return out, best
 
 
+def gvxr_set_materials(meshes_by_material, materials):
+    """Give each material's gvxr mesh its composition and density.
+
+    ``materials``: {material: (symbols, mass fractions, density g/cm³)}, e.g.
+    ``{"warp": (["C"], [1.0], 1.8)}``; set with gvxr.setMixture (mass fractions, as
+    gvxr's "weights") + gvxr.setDensity(..., "g/cm3").  Uploads the meshes first if needed.
+    Returns {material: gvxr label}."""
+    _init()
+    if _init_error is not None:
+        raise RuntimeError(f"gvxr unavailable: {_init_error}")
+    g = _gvxr
+    with _quiet(), _gvxr_context():
+        _upload(meshes_by_material)
+        for mat, label in _labels.items():
+            symbols, weights, density = materials[mat]
+            g.setMixture(label, [str(s) for s in symbols], [float(w) for w in weights])
+            g.setDensity(label, float(density), "g/cm3")
+    return dict(_labels)
+
+
+def gvxr_linear_attenuation(label: str, energies_kev) -> np.ndarray:
+    """gvxr's own μ (mm⁻¹) of a mesh's material at ``energies_kev`` (getLinearAttenuationCoefficient, cm⁻¹ / 10)."""
+    g = _gvxr
+    with _quiet(), _gvxr_context():
+        return np.array([g.getLinearAttenuationCoefficient(label, float(e), "keV") for e in energies_kev]) / 10.0
+
+
+def gvxr_xray_image(meshes_by_material, materials, energies_kev, photons, sod_mm: float, sdd_mm: float,
+                    shape: tuple[int, int], pixel_mm: float, angle_rad: float = 0.0, repeats: int = 3,
+                    bin_cutoff_kev: float | None = None) -> dict:
+    """gvxr's polychromatic radiograph of one cone-beam view, as transmission (image / flat).
+
+    ``materials``: see :func:`gvxr_set_materials`; ``energies_kev`` / ``photons``: the beam
+    spectrum, one gvxr.addEnergyBinToSpectrum(E, "keV", N) per bin with N > 0 (gvxr takes N as
+    photons *per pixel*, uniform over the detector: no inverse square or obliquity).
+    ``bin_cutoff_kev``: None leaves gvxr's bin cut-off as it is (its default drops the weakest
+    bins; gvxr has no getter for the default, so once set it cannot be restored in this
+    process), a number calls gvxr.setBinTotalEnergyCutoff(value, "keV") (0 keeps every bin).
+
+    gvxr.computeXRayImage() (default anIntegrateEnergyFlag=True) returns the energy fluence per
+    pixel, Σ_b N_b·E_b·exp(−Σ μ·L) in MeV (float32 values), with no detector energy response
+    unless one was loaded (none is here: clearDetectorEnergyResponse).  The flat is gvxr's
+    getTotalEnergyWithDetectorResponse() (Σ N_b·E_b over the bins it kept, MeV): the value of
+    an unattenuated pixel.
+
+    Returns {"transmission": float64 (rows, cols) in our orientation (see the module
+    docstring), "flat": MeV, "seconds": best of ``repeats`` after one warm-up of (set the view's
+    source/detector, computeXRayImage, numpy conversion, ÷ flat), "bins_given", "bins_kept",
+    "energies_kept_kev"}.  Not timed: upload, materials, spectrum, detector size set-up.
+    """
+    gvxr_set_materials(meshes_by_material, materials)
+    g = _gvxr
+    nrow, ncol = (int(s) for s in shape)
+    c, s = np.cos(angle_rad), np.sin(angle_rad)
+    src = (float(sod_mm * s), float(-sod_mm * c), 0.0)
+    odd = float(sdd_mm - sod_mm)
+    det = (float(-odd * s), float(odd * c), 0.0)
+    right = (float(c), float(s), 0.0)
+    energies = np.asarray(energies_kev, np.float64)
+    photons = np.asarray(photons, np.float64)
+    given = int(np.count_nonzero(photons > 0))
+
+    def render(flat):
+        g.setSourcePosition(*src, "mm")
+        g.setDetectorPosition(*det, "mm")
+        g.setDetectorUpVector(0.0, 0.0, 1.0)
+        g.setDetectorRightVector(*right)
+        return np.asarray(g.computeXRayImage(), dtype=np.float64) / flat
+
+    best = float("inf")
+    with _quiet(), _gvxr_context():
+        g.clearDetectorEnergyResponse()
+        if bin_cutoff_kev is not None:
+            g.setBinTotalEnergyCutoff(float(bin_cutoff_kev), "keV")
+        g.resetBeamSpectrum()
+        for e, n in zip(energies, photons):
+            if n > 0:
+                g.addEnergyBinToSpectrum(float(e), "keV", float(n))
+        g.setDetectorNumberOfPixels(ncol, nrow)
+        g.setDetectorPixelSize(float(pixel_mm), float(pixel_mm), "mm")
+        out = render(1.0)                         # warm-up; gvxr applies its bin cut-off here
+        flat = float(g.getTotalEnergyWithDetectorResponse())
+        kept = np.asarray(g.getEnergyBins("keV"), np.float64)
+        for _ in range(max(1, int(repeats))):
+            t0 = time.perf_counter()
+            out = render(flat)
+            best = min(best, time.perf_counter() - t0)
+    return {"transmission": out, "flat": flat, "seconds": best, "bins_given": given,
+            "bins_kept": int(len(kept)), "energies_kept_kev": kept}
+
+
 def _box(centre, size):
     """Closed, outward-CCW triangulated axis-aligned cube (for the self-check)."""
     v = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)

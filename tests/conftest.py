@@ -1,6 +1,7 @@
-"""Shared fixtures. Capabilities (a GL driver, the OSMesa fallback) are probed once; a missing one
-skips with the reason, unless XRAYRASTER_REQUIRE_GL=1 / XRAYRASTER_REQUIRE_OSMESA=1 (set by .ci/run),
-which turn that skip into a failure."""
+"""Shared fixtures. Capabilities (a GL driver, the OSMesa fallback, an OpenCL device) are probed
+once; a missing one skips with the reason, unless XRAYRASTER_REQUIRE_GL=1 /
+XRAYRASTER_REQUIRE_OSMESA=1 / XRAYRASTER_REQUIRE_OPENCL=1 (set by .ci/run), which turn that skip
+into a failure."""
 
 from __future__ import annotations
 
@@ -40,6 +41,19 @@ def osmesa():
         ctx = GLContext("osmesa")
     except GLContextError as exc:
         _require("OSMESA", str(exc))
+    yield ctx
+    ctx.release()
+
+
+@pytest.fixture(scope="session")
+def cl():
+    """An OpenCL context on the default device (PoCL on a CPU machine)."""
+    from xrayraster.opencl import CLContext, OpenCLError
+
+    try:
+        ctx = CLContext()
+    except OpenCLError as exc:
+        _require("OPENCL", str(exc))
     yield ctx
     ctx.release()
 

@@ -1,10 +1,12 @@
 """xrayraster: X-ray CT simulation from triangle meshes (see README.md and DESIGN.md)."""
 
 from .detector import Detector
+from .reconstruction import ReconstructionError, Volume, fdk
 from .geometry import ConeBeamGeometry, GeometryError, ParallelBeamGeometry, VectorGeometry, VolumeGeometry, full_circle
 from .glcontext import GLContext, GLContextError
 from .materials import Material, MaterialError
 from .mesh import Mesh, MeshError, load_mesh
+from .opencl import CLContext, OpenCLError
 from .physics import PhysicsError
 from .radiograph import Radiograph
 from .render import RenderError, Renderer
@@ -15,6 +17,7 @@ from .transform import Transform
 __version__ = "0.1.0"
 
 __all__ = [
+    "CLContext",
     "ConeBeamGeometry",
     "Detector",
     "GLContext",
@@ -24,9 +27,11 @@ __all__ = [
     "MaterialError",
     "Mesh",
     "MeshError",
+    "OpenCLError",
     "ParallelBeamGeometry",
     "PhysicsError",
     "Radiograph",
+    "ReconstructionError",
     "RenderError",
     "Renderer",
     "Scene",
@@ -36,7 +41,9 @@ __all__ = [
     "SpectrumError",
     "Transform",
     "VectorGeometry",
+    "Volume",
     "VolumeGeometry",
+    "fdk",
     "full_circle",
     "load_mesh",
 ]

@@ -1,4 +1,5 @@
-"""Command line: ``xrayraster render scene.toml -o out.tif`` (radiographs, or ``--path-lengths``)."""
+"""Command line: ``xrayraster render scene.toml -o out.tif`` (radiographs, or ``--path-lengths``) and
+``xrayraster reconstruct projections.tif --geometry scan.json -o volume.tif`` (FDK / FBP)."""
 
 from __future__ import annotations
 
@@ -14,19 +15,23 @@ from . import __version__
 from .config import ConfigError, load_scene_file
 from .detector import Detector
 from .geometry import GeometryError
+from .geometry_io import geometry_from_repr, read_scan_file
 from .glcontext import GLContextError
 from .io import write_quicklook, write_tiff
 from .materials import Material, MaterialError
 from .mesh import MeshError
+from .opencl import OpenCLError
 from .physics import PhysicsError
 from .radiograph import OUTPUTS
+from .ramp_filter import FILTERS
+from .reconstruction import INPUTS, ReconstructionError, fdk
 from .render import Renderer, RenderError
 from .scene import SceneError
 from .spectrum import SpectrumError
 
 USER_ERRORS = (
-    ConfigError, GeometryError, GLContextError, MaterialError, MeshError, PhysicsError, RenderError, SceneError,
-    SpectrumError,
+    ConfigError, GeometryError, GLContextError, MaterialError, MeshError, OpenCLError, PhysicsError, ReconstructionError,
+    RenderError, SceneError, SpectrumError,
 )
 
 
@@ -48,10 +53,24 @@ def main(argv=None) -> int:
     render.add_argument("--supersampling", type=int, default=1, help="k×k rays per pixel (default 1)")
     render.add_argument("--overlap", choices=("auto", "sum", "nested", "resolve"), default="auto", help="overlap handling (default auto)")
     render.add_argument("-v", "--verbose", action="store_true")
+    rec = sub.add_parser("reconstruct", help="FDK (cone beam) or FBP (parallel beam) reconstruction of a projection stack")
+    rec.add_argument("projections", type=Path, help="TIFF stack (views, rows, cols), e.g. from 'xrayraster render --views all'")
+    rec.add_argument("--geometry", metavar="SCAN.json", type=Path, required=True,
+                     help="scan file: the volume grid, and the scan geometry unless the TIFF carries it (docs/reconstruction.md)")
+    rec.add_argument("-o", "--out", dest="out", metavar="VOLUME.tif", type=Path, required=True,
+                     help="float32 TIFF volume (z, y, x) in 1/cm (a PNG of the central slice goes beside it)")
+    rec.add_argument("--filter", choices=FILTERS, default="ram-lak", help="ramp filter window (default ram-lak)")
+    rec.add_argument("--cutoff", type=float, default=1.0, help="filter cut-off, fraction of Nyquist (default 1)")
+    rec.add_argument("--scan", choices=("auto", "full", "short"), default="auto",
+                     help="full circle (redundancy ½ or displaced-detector weights) or short scan (Parker); default auto")
+    rec.add_argument("--input", choices=INPUTS, default=None,
+                     help="what the TIFF holds (default: its metadata, written by 'xrayraster render', else lineint)")
+    rec.add_argument("--device", default=None, help="OpenCL device: 'P:D' or part of its name (default: the fastest)")
+    rec.add_argument("-v", "--verbose", action="store_true")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(message)s")
     try:
-        return _render(args)
+        return _reconstruct(args) if args.command == "reconstruct" else _render(args)
     except USER_ERRORS as exc:
         print(f"xrayraster: error: {exc}", file=sys.stderr)
         return 2
@@ -178,6 +197,62 @@ def _render_radiographs(args) -> int:
         + "".join(f", {e}" for e in extras)
         + f", {method} pass, {seconds:.2f} s on {driver}; quick-look {png}"
     )
+    return 0
+
+
+def _reconstruct(args) -> int:
+    import tifffile
+
+    geometry, volume = read_scan_file(args.geometry)
+    try:
+        with tifffile.TiffFile(args.projections) as tif:
+            stack = tif.asarray()
+            info_text = (tif.imagej_metadata or {}).get("Info")
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"{args.projections}: cannot read a TIFF stack ({exc})") from None
+    info = {}
+    if info_text:
+        import json
+
+        try:
+            info = json.loads(info_text)
+        except json.JSONDecodeError:
+            info = {}
+    if info.get("quantity") == "path length":
+        raise ConfigError(f"{args.projections} holds path lengths per material; reconstruct radiographs "
+                          "(xrayraster render without --path-lengths)")
+    if stack.ndim == 2:
+        stack = stack[None]
+    if geometry is None:
+        if "geometry" not in info:
+            raise ConfigError(f"{args.geometry} has no 'geometry' and {args.projections} carries none in its metadata; "
+                              "add the scan geometry to the scan file (docs/reconstruction.md)")
+        geometry = geometry_from_repr(info["geometry"])
+    kind = args.input or info.get("output", "lineint")
+    if kind == "raw":
+        raise ConfigError(f"{args.projections} holds the raw detector signal; render with --output lineint or "
+                          "transmission (flat- and dark-corrected) to reconstruct")
+    start = time.perf_counter()
+    vol = fdk(stack, geometry, volume, filter=args.filter, cutoff=args.cutoff, scan=args.scan, input=kind,
+              device=args.device)
+    seconds = time.perf_counter() - start
+    vz, vy, vx = volume.voxel_size
+    out = write_tiff(args.out, vol.data, axes="ZYX", pixel_size_mm=(vy, vx), spacing_mm=vz, info={
+        "quantity": "linear attenuation coefficient (FDK)" if geometry.beam == "cone" else "linear attenuation coefficient (FBP)",
+        "units": vol.unit,
+        "axes": "z, y, x",
+        "volume_geometry": repr(volume),
+        "geometry": repr(geometry),
+        "filter": args.filter,
+        "cutoff": args.cutoff,
+        "scan": args.scan,
+        "input": kind,
+        "projections_file": str(args.projections),
+    })
+    png = write_quicklook(args.out.with_suffix(".png"), np.clip(vol.data[vol.data.shape[0] // 2], 0, None))
+    print(f"{out}: {'×'.join(map(str, vol.data.shape))} voxels (z, y, x) of {vz:g}×{vy:g}×{vx:g} mm, "
+          f"{vol.unit}, range {vol.data.min():.4g} to {vol.data.max():.4g}, {stack.shape[0]} views, "
+          f"{seconds:.2f} s; central slice {png}")
     return 0
 
 

@@ -15,10 +15,10 @@ import ctypes.util
 import os
 import re
 from contextlib import contextmanager
-from importlib import resources
-from pathlib import Path
 
 import moderngl
+
+from .resources import read_shader
 
 REQUIRED_GL = 430  # SSBOs, compute shaders, indirect draws
 
@@ -172,17 +172,9 @@ _INCLUDE = re.compile(r'^#include "([^"]+)"\s*$', re.MULTILINE)
 
 def shader_source(name: str, defines: dict | None = None) -> str:
     """GLSL text of ``shaders/<name>`` with ``#include "x"`` expanded and ``defines`` inserted."""
-    text = _read_shader(name)
-    text = _INCLUDE.sub(lambda m: _read_shader(m.group(1)), text)
+    text = read_shader(name)
+    text = _INCLUDE.sub(lambda m: read_shader(m.group(1)), text)
     if defines:
         head, _, body = text.partition("\n")  # '#version' must stay the first line
         text = head + "\n" + "".join(f"#define {k} {v}\n" for k, v in defines.items()) + body
     return text
-
-
-def _read_shader(name: str) -> str:
-    try:
-        return resources.files("xrayraster.shaders").joinpath(name).read_text()
-    except (ModuleNotFoundError, FileNotFoundError):
-        # Running from a source checkout that is not installed: shaders/ sits beside the package.
-        return (Path(__file__).resolve().parent.parent / "shaders" / name).read_text()

@@ -40,12 +40,16 @@ def atomic_write(path, write) -> Path:
     return path
 
 
-def write_tiff(path, data: np.ndarray, *, axes: str, pixel_size_mm: tuple[float, float], info: dict) -> Path:
-    """Float32 ImageJ hyperstack (Fiji reads axes and mm scale); ``info`` goes in as JSON."""
+def write_tiff(path, data: np.ndarray, *, axes: str, pixel_size_mm: tuple[float, float], info: dict,
+               spacing_mm: float | None = None) -> Path:
+    """Float32 ImageJ hyperstack (Fiji reads axes and mm scale: ``pixel_size_mm`` (y, x) and, for
+    volumes, the slice ``spacing_mm``); ``info`` goes in as JSON."""
     import tifffile
 
     data = np.ascontiguousarray(data, dtype=np.float32)
     metadata = {"axes": axes, "unit": "mm", "Info": json.dumps(info, indent=1)}
+    if spacing_mm is not None:
+        metadata["spacing"] = float(spacing_mm)
     resolution = (1.0 / pixel_size_mm[1], 1.0 / pixel_size_mm[0])
     return atomic_write(
         path, lambda tmp: tifffile.imwrite(tmp, data, imagej=True, metadata=metadata, resolution=resolution)

@@ -20,6 +20,9 @@ no sampling.
 
 from __future__ import annotations
 
+import os
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,14 +47,16 @@ def pixel_photon_factor(geometry, view: int) -> np.ndarray:
     normal = np.cross(u, v)
     area = np.linalg.norm(normal)
     normal /= area
-    r = (np.arange(rows) - (rows - 1) / 2)[:, None, None]
-    c = (np.arange(cols) - (cols - 1) / 2)[None, :, None]
-    centres = d + c * u + r * v
     if vec.beam == "cone":
-        ray = centres - s
-        distance = np.linalg.norm(ray, axis=-1)
-        cos = np.abs(ray @ normal) / distance
-        return area * cos * (REFERENCE_DISTANCE_MM / distance) ** 2
+        # ray = (d − s) + c·u + r·v; |ray|² expanded so only (rows, 1) + (1, cols) terms are
+        # formed, and n·ray = n·(d − s) for every pixel (u, v lie in the plane).
+        r = (np.arange(rows) - (rows - 1) / 2)[:, None]
+        c = (np.arange(cols) - (cols - 1) / 2)[None, :]
+        h = d - s
+        along_r = r * r * (v @ v) + 2 * r * (v @ h) + h @ h
+        along_c = c * c * (u @ u) + 2 * c * (u @ h)
+        distance2 = along_r + along_c + 2 * (u @ v) * r * c
+        return (area * abs(float(normal @ h)) * REFERENCE_DISTANCE_MM**2) * distance2**-1.5
     cos = abs(float(s @ normal)) / np.linalg.norm(s)
     return np.full((rows, cols), area * cos)
 
@@ -83,14 +88,43 @@ def expected_signal(lengths, mu, photons, weights, factor) -> np.ndarray:
     if mu.shape[1] == 1:  # monochromatic: no spectral loop
         return weighted[0] * factor * np.exp(-np.tensordot(mu[:, 0], lengths, axes=1))
     out = np.empty(lengths.shape[1:])
-    step = max(1, 2**22 // (mu.shape[1] * lengths.shape[2]))
-    for start in range(0, lengths.shape[1], step):
-        rows = slice(start, start + step)
+
+    def block(rows):
         exponent = np.tensordot(mu.T, lengths[:, rows], axes=1)
         np.negative(exponent, out=exponent)
         np.exp(exponent, out=exponent)
         out[rows] = np.tensordot(weighted, exponent, axes=1) * factor[rows]
+
+    _over_row_blocks(block, lengths.shape[1], _block_rows(mu.shape[1], lengths.shape[2]))
     return out
+
+
+def _block_rows(bins: int, cols: int) -> int:
+    """Rows per block so a block's (bins × pixels) float64 intermediate stays near 32 MiB."""
+    return max(1, 2**22 // (bins * cols))
+
+
+def _over_row_blocks(work, rows: int, step: int) -> None:
+    """``work(slice)`` on every block of ``step`` rows, on all cores; blocks write disjoint
+    rows, so the result does not depend on the thread count."""
+    for _ in _in_order(work, [slice(start, start + step) for start in range(0, rows, step)]):
+        pass
+
+
+def _in_order(work, items):
+    """``work(item)`` for each item on all cores (NumPy's ufuncs and BLAS release the GIL),
+    yielding results in order, at most two per thread ahead of the consumer (bounded memory)."""
+    threads = min(len(items), os.cpu_count() or 1)
+    if threads <= 1:
+        yield from map(work, items)
+        return
+    with ThreadPoolExecutor(threads) as pool:
+        pending = deque(pool.submit(work, item) for item in items[: 2 * threads])
+        for item in items[2 * threads :]:
+            yield pending.popleft().result()
+            pending.append(pool.submit(work, item))
+        while pending:
+            yield pending.popleft().result()
 
 
 # Above this many expected detected photons per pixel, an integrating detector's compound
@@ -116,16 +150,21 @@ def sampled_signal(lengths, mu, photons, efficiency, energies, factor, counting:
         return rng.poisson(mean).astype(np.float64)
     factor = np.broadcast_to(np.asarray(factor, dtype=np.float64), lengths.shape[1:])
     out = np.empty(lengths.shape[1:])
-    step = max(1, 2**22 // (mu.shape[1] * lengths.shape[2]))
-    for start in range(0, lengths.shape[1], step):
-        rows = slice(start, start + step)
+
+    def moments(rows):  # the deterministic part, computed on all cores
         detected = transmitted_photons(lengths[:, rows], mu, photons * efficiency, factor[rows])
         mean = np.tensordot(energies, detected, axes=1)
         spread = np.sqrt(np.tensordot(energies**2, detected, axes=1))
-        chunk = mean + spread * rng.standard_normal(mean.shape)
         few = detected.sum(axis=0) < EXACT_BELOW_PHOTONS
+        return mean, spread, few, detected[:, few]
+
+    # Draws happen block after block in row order, so the bytes depend on the seed only.
+    step = _block_rows(mu.shape[1], lengths.shape[2])
+    blocks = [slice(start, start + step) for start in range(0, lengths.shape[1], step)]
+    for rows, (mean, spread, few, detected_few) in zip(blocks, _in_order(moments, blocks)):
+        chunk = mean + spread * rng.standard_normal(mean.shape)
         if few.any():
-            chunk[few] = energies @ rng.poisson(detected[:, few])
+            chunk[few] = energies @ rng.poisson(detected_few)
         out[rows] = chunk
     return out
 

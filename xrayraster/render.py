@@ -48,6 +48,7 @@ from .glcontext import GLContext
 from .physics import pixel_photon_factor
 from .radiograph import radiograph
 from .raysetup import view_rays
+from .resources import available_memory
 from .scene import Scene, SceneError
 
 log = logging.getLogger("xrayraster")
@@ -220,7 +221,7 @@ class Renderer:
                 f"exceeds this GL driver's limit of {limit} pixels per side; use fewer pixels or less supersampling"
             )
         need = rows * cols * (4 * 3 + _NODE_BYTES * _MIN_CROSSINGS)  # one channel + lists, lower bound
-        free = _available_memory()
+        free = available_memory()
         if free is not None and need > free:
             raise RenderError(
                 f"detector_shape {self._vec.detector_shape} × supersampling {self.supersampling} needs at least "
@@ -419,7 +420,7 @@ class Renderer:
         rows, cols = self._render_vec.detector_shape
         capacity = int(needed * 1.25) + 1024
         size = capacity * _NODE_BYTES
-        free = _available_memory()
+        free = available_memory()
         if free is not None and size > free // 2:
             raise RenderError(
                 f"the scene has {needed} ray-surface crossings in one view ({needed / (rows * cols):.0f} per pixel); "
@@ -468,14 +469,4 @@ def _refine(vec: VectorGeometry, k: int) -> VectorGeometry:
     return VectorGeometry(vec.beam, (rows * k, cols * k), arr)
 
 
-def _available_memory() -> int | None:
-    """Bytes of memory available to this process (Linux), or None when unknown."""
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        return None
-    return None
 

@@ -1,0 +1,99 @@
+// FDK stage 1: pre-weight, zero-pad and ramp-filter detector rows (xrayraster/reconstruction.py).
+//
+// One work-group filters two rows at once: they go in as the real and imaginary parts of one
+// complex FFT. The ramp response is real and even, so the filtered rows come back separated
+// in the real and imaginary parts. Forward FFT: decimation in frequency (natural order in,
+// bit-reversed out); the response is stored bit-reversed; inverse FFT: decimation in time
+// (bit-reversed in, natural out). No reordering pass is needed.
+//
+// BUF is __local (the row pair lives in local memory) unless the padded row does not fit
+// there, in which case the host builds with -DBUF=__global and passes scratch space.
+
+#ifndef BUF
+#define BUF __local
+#endif
+
+inline float2 cmul(float2 a, float2 b) { return (float2)(a.x * b.x - a.y * b.y, a.x * b.y + a.y * b.x); }
+
+// Pre-weight of pixel (row, col): redundancy × cosine weight D / |p − s| (1 for parallel beams).
+// geo holds per view: s.xyz D, d.xyz 0, u.xyz 0, v.xyz 0 (mm).
+inline float pre_weight(__global const float4* geo, __global const float* redundancy, int view, int row, int col,
+                        int rows, int cols, int cone) {
+    float w = redundancy[view * cols + col];
+    if (cone) {
+        float4 s = geo[4 * view], d = geo[4 * view + 1], u = geo[4 * view + 2], v = geo[4 * view + 3];
+        float3 p = d.xyz + (col - 0.5f * (cols - 1)) * u.xyz + (row - 0.5f * (rows - 1)) * v.xyz;
+        w *= s.w / length(p - s.xyz);
+    }
+    return w;
+}
+
+__kernel void filter_rows(__global const float* projections,  // (views, rows, cols) line integrals
+                          __global float* filtered,           // (views, rows + 2, cols + 2) or COLUMN_MAJOR; ring kept zero
+                          __global const float* redundancy,   // (views, cols)
+                          __global const float4* geo,         // (views, 4) see pre_weight
+                          __global const float* response,     // (n) bit-reversed, 1/n included
+                          __global const float2* twiddle,     // (n/2) exp(−2πik/n)
+                          BUF float2* scratch,                // n per work-group (local) or per pair (global)
+                          int rows, int cols, int n, int cone) {
+    const int pair = get_group_id(0);
+    const int pairs_per_view = (rows + 1) / 2;
+    const int view = pair / pairs_per_view;
+    const int r0 = 2 * (pair % pairs_per_view);
+    const int r1 = r0 + 1;
+    const int lid = get_local_id(0), lsize = get_local_size(0);
+#ifdef GLOBAL_SCRATCH
+    BUF float2* buf = scratch + (size_t)pair * n;
+#else
+    BUF float2* buf = scratch;
+#endif
+    __global const float* in0 = projections + ((size_t)view * rows + r0) * cols;
+    for (int k = lid; k < n; k += lsize) {
+        float2 x = (float2)(0.0f, 0.0f);
+        if (k < cols) {
+            x.x = in0[k] * pre_weight(geo, redundancy, view, r0, k, rows, cols, cone);
+            if (r1 < rows) x.y = in0[cols + k] * pre_weight(geo, redundancy, view, r1, k, rows, cols, cone);
+        }
+        buf[k] = x;
+    }
+    barrier(CLK_LOCAL_MEM_FENCE | CLK_GLOBAL_MEM_FENCE);
+
+    const int halfn = n / 2;
+    for (int span = halfn; span >= 1; span >>= 1) {  // forward, decimation in frequency
+        const int stride = halfn / span;
+        for (int j = lid; j < halfn; j += lsize) {
+            const int idx = j & (span - 1);
+            const int a = ((j - idx) << 1) + idx, b = a + span;
+            const float2 x = buf[a], y = buf[b];
+            buf[a] = x + y;
+            buf[b] = cmul(x - y, twiddle[idx * stride]);
+        }
+        barrier(CLK_LOCAL_MEM_FENCE | CLK_GLOBAL_MEM_FENCE);
+    }
+    for (int k = lid; k < n; k += lsize) buf[k] *= response[k];
+    barrier(CLK_LOCAL_MEM_FENCE | CLK_GLOBAL_MEM_FENCE);
+    for (int span = 1; span < n; span <<= 1) {  // inverse, decimation in time
+        const int stride = halfn / span;
+        for (int j = lid; j < halfn; j += lsize) {
+            const int idx = j & (span - 1);
+            const int a = ((j - idx) << 1) + idx, b = a + span;
+            const float2 t = twiddle[idx * stride];
+            const float2 y = cmul(buf[b], (float2)(t.x, -t.y));
+            const float2 x = buf[a];
+            buf[a] = x + y;
+            buf[b] = x - y;
+        }
+        barrier(CLK_LOCAL_MEM_FENCE | CLK_GLOBAL_MEM_FENCE);
+    }
+
+#ifdef COLUMN_MAJOR
+    const int row_step = 1, col_step = rows + 2;
+#else
+    const int row_step = cols + 2, col_step = 1;
+#endif
+    __global float* out = filtered + (size_t)view * (rows + 2) * (cols + 2) + (r0 + 1) * row_step + col_step;
+    for (int k = lid; k < cols; k += lsize) {
+        out[k * col_step] = buf[k].x;
+        if (r1 < rows) out[k * col_step + row_step] = buf[k].y;
+    }
+}
