@@ -105,6 +105,21 @@ __attribute__((always_inline)) inline float8 pick(float8 low, float8 high, int8 
 
 __attribute__((always_inline)) inline float8 window_sample(__global const float* qc, int pitch, float8 row, float fc,
                                                            float row_end) {
+    // Fast path, the usual case (voxels no coarser than the magnified pixels, all 8 rows on the
+    // detector): the rows span fewer than 8, so one load at the first row and one a row later
+    // give both bilinear neighbours of every lane with a single permute each.
+    const float row_min = row.s0 < row.s7 ? row.s0 : row.s7, row_max = row.s0 < row.s7 ? row.s7 : row.s0;
+    if (row_min >= 0.0f && row_max < row_end && row_max - row_min < 7.0f) {
+        const int8 r = __builtin_convertvector(row, int8);  // floor: row ≥ 0
+        const int start = (int)row_min;
+        const int8 k = r - start;
+        const float8 p00 = __builtin_ia32_permvarsf256(*(__global const float8u*)(qc + start), k);
+        const float8 p10 = __builtin_ia32_permvarsf256(*(__global const float8u*)(qc + start + 1), k);
+        const float8 p01 = __builtin_ia32_permvarsf256(*(__global const float8u*)(qc + pitch + start), k);
+        const float8 p11 = __builtin_ia32_permvarsf256(*(__global const float8u*)(qc + pitch + start + 1), k);
+        const float8 low = p00 + fc * (p01 - p00), high = p10 + fc * (p11 - p10);
+        return low + (row - __builtin_convertvector(r, float8)) * (high - low);
+    }
     const int8 inside = (row >= 0.0f) & (row < row_end);
     const float8 rowc = (row < 0.0f) ? 0.0f : ((row > row_end) ? row_end : row);  // monotone along the lanes
     const int8 r = __builtin_convertvector(rowc, int8);  // floor: rowc ≥ 0

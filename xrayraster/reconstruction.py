@@ -34,8 +34,9 @@ log = logging.getLogger(__name__)
 INPUTS = ("lineint", "transmission")
 MM_TO_CM = 10.0  # μ in mm⁻¹ × 10 = cm⁻¹
 ZCHUNK = 16  # voxels along z per work-item of the scalar backprojection (shaders/fdk_backproject.cl)
-GROUPS = 4  # float8s along z per work-item of backproject_windowed: 32 voxels
-SLAB_MULTIPLE = 32  # slabs are cut at multiples of both
+MAX_GROUPS = 8  # float8s along z per work-item of backproject_windowed: up to 64 voxels
+SLAB_MULTIPLE = 64  # slabs are cut at multiples of both
+TILE = (16, 16, 1)  # work-group: a 16×16 column of voxels reads a compact patch of every view
 MAX_BATCH_VIEWS = 256  # views per backprojection launch: 48 bytes each of constant memory
 # Kernel choices, normally automatic; the tests set them to check every path on one device.
 LAYOUT = "auto"  # filtered views by "rows" (GPUs), by "columns" (CPUs), or "auto" by device type
@@ -219,12 +220,16 @@ def _reconstruct(ctx: CLContext, stack, views: FDKViews, response, volume: Volum
     # Stage 2: backproject slab by slab.
     matrices = views.matrices
     upright = not np.any(matrices[:, :, 2][:, [0, 2]])  # column and depth constant along z
-    defines = {"ZCHUNK": ZCHUNK, "GROUPS": GROUPS, **layout, **({"UPRIGHT": 1} if upright else {})}
+    # As many float8s per work-item as the slab fills, up to MAX_GROUPS (measured best on 2 cores).
+    groups = min(MAX_GROUPS, 1 << max(0, math.ceil(math.log2(-(-plan.slab // 8)))))
+    defines = {"ZCHUNK": ZCHUNK, "GROUPS": groups, **layout, **({"UPRIGHT": 1} if upright else {})}
     bp_kernel = None
     if VECTORISED and upright and layout:  # compiled only where the device has AVX2
         bp_kernel = ctx.kernel("fdk_backproject.cl", "backproject_windowed", defines, optional=True)
-    zchunk = 8 * GROUPS if bp_kernel is not None else ZCHUNK
+    zchunk = 8 * groups if bp_kernel is not None else ZCHUNK
     bp_kernel = bp_kernel or ctx.kernel("fdk_backproject.cl", "backproject", defines)
+    fits = bp_kernel.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, ctx.device)
+    tile = TILE if fits >= TILE[0] * TILE[1] else None  # else the driver picks
     out = np.empty(volume.shape, np.float32)
     for z0 in range(0, nz, plan.slab):
         depth = min(plan.slab, nz - z0)
@@ -240,8 +245,8 @@ def _reconstruct(ctx: CLContext, stack, views: FDKViews, response, volume: Volum
                 cl.enqueue_copy(ctx.queue, q_dev, filtered_host[batch.start : batch.stop])
             m_dev = ctx.buffer(shifted[batch.start : batch.stop].reshape(-1, 12).astype(np.float32), "r")
             s_dev = ctx.buffer(views.scale[batch.start : batch.stop].astype(np.float32), "r")
-            size = (_round_up(nx, 8), ny, -(-depth // zchunk))
-            bp_kernel(ctx.queue, size, None, slab_dev, q_dev, m_dev, s_dev, np.int32(len(batch)), np.int32(rows),
+            size = (_round_up(nx, TILE[0]), _round_up(ny, TILE[1]), -(-depth // zchunk))
+            bp_kernel(ctx.queue, size, tile, slab_dev, q_dev, m_dev, s_dev, np.int32(len(batch)), np.int32(rows),
                       np.int32(cols), np.int32(nx), np.int32(ny), np.int32(depth))
             if not plan.resident:
                 q_dev.release()
