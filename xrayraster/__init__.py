@@ -13,6 +13,7 @@ from .render import RenderError, Renderer
 from .scene import Scene, SceneError, SceneObject
 from .spectrum import Spectrum, SpectrumError
 from .transform import Transform
+from .voxelize import LabelVolume, VoxelizeError, voxelize
 
 __version__ = "0.1.0"
 
@@ -23,6 +24,7 @@ __all__ = [
     "GLContext",
     "GLContextError",
     "GeometryError",
+    "LabelVolume",
     "Material",
     "MaterialError",
     "Mesh",
@@ -42,8 +44,10 @@ __all__ = [
     "Transform",
     "VectorGeometry",
     "Volume",
+    "VoxelizeError",
     "VolumeGeometry",
     "fdk",
     "full_circle",
     "load_mesh",
+    "voxelize",
 ]

@@ -1,5 +1,6 @@
-"""Command line: ``xrayraster render scene.toml -o out.tif`` (radiographs, or ``--path-lengths``) and
-``xrayraster reconstruct projections.tif --geometry scan.json -o volume.tif`` (FDK / FBP)."""
+"""Command line: ``xrayraster render scene.toml -o out.tif`` (radiographs, or ``--path-lengths``),
+``xrayraster reconstruct projections.tif --geometry scan.json -o volume.tif`` (FDK / FBP) and
+``xrayraster voxelize scene.toml --volume scan.json -o labels.tif`` (label volumes)."""
 
 from __future__ import annotations
 
@@ -27,11 +28,12 @@ from .ramp_filter import FILTERS
 from .reconstruction import INPUTS, ReconstructionError, fdk
 from .render import Renderer, RenderError
 from .scene import SceneError
+from .voxelize import VoxelizeError, voxelize
 from .spectrum import SpectrumError
 
 USER_ERRORS = (
     ConfigError, GeometryError, GLContextError, MaterialError, MeshError, OpenCLError, PhysicsError, ReconstructionError,
-    RenderError, SceneError, SpectrumError,
+    RenderError, SceneError, SpectrumError, VoxelizeError,
 )
 
 
@@ -67,10 +69,17 @@ def main(argv=None) -> int:
                      help="what the TIFF holds (default: its metadata, written by 'xrayraster render', else lineint)")
     rec.add_argument("--device", default=None, help="OpenCL device: 'P:D' or part of its name (default: the fastest)")
     rec.add_argument("-v", "--verbose", action="store_true")
+    vox = sub.add_parser("voxelize", help="label volume of a TOML scene on a voxel grid (the reconstruction's)")
+    vox.add_argument("scene", type=Path, help="scene file (docs/scene-format.md): objects, labels, priorities")
+    vox.add_argument("--volume", metavar="SCAN.json", type=Path, required=True,
+                     help="scan file whose 'volume' gives the voxel grid (docs/reconstruction.md)")
+    vox.add_argument("-o", "--out", dest="out", metavar="LABELS.tif", type=Path, required=True,
+                     help="uint8 (uint16 above 255 labels) TIFF (z, y, x); a PNG of the central slice goes beside it")
+    vox.add_argument("-v", "--verbose", action="store_true")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(message)s")
     try:
-        return _reconstruct(args) if args.command == "reconstruct" else _render(args)
+        return {"reconstruct": _reconstruct, "voxelize": _voxelize}.get(args.command, _render)(args)
     except USER_ERRORS as exc:
         print(f"xrayraster: error: {exc}", file=sys.stderr)
         return 2
@@ -253,6 +262,31 @@ def _reconstruct(args) -> int:
     print(f"{out}: {'×'.join(map(str, vol.data.shape))} voxels (z, y, x) of {vz:g}×{vy:g}×{vx:g} mm, "
           f"{vol.unit}, range {vol.data.min():.4g} to {vol.data.max():.4g}, {stack.shape[0]} views, "
           f"{seconds:.2f} s; central slice {png}")
+    return 0
+
+
+def _voxelize(args) -> int:
+    loaded = load_scene_file(args.scene)
+    _, volume = read_scan_file(args.volume)
+    start = time.perf_counter()
+    labels = voxelize(loaded.scene, volume)
+    seconds = time.perf_counter() - start
+    names: dict[int, list[str]] = {}
+    for o in loaded.scene.objects:
+        names.setdefault(o.label, []).append(o.name)
+    vz, vy, vx = volume.voxel_size
+    out = write_tiff(args.out, labels.data, axes="ZYX", pixel_size_mm=(vy, vx), spacing_mm=vz, info={
+        "quantity": "label (0: background; else the label of the highest-priority object at the voxel centre)",
+        "axes": "z, y, x",
+        "labels": {str(k): v for k, v in sorted(names.items())},
+        "volume_geometry": repr(volume),
+        "scene_file": str(args.scene),
+    })
+    png = write_quicklook(args.out.with_suffix(".png"), labels.data[labels.data.shape[0] // 2].astype(np.float32))
+    counts = np.bincount(labels.data.ravel())
+    present = ", ".join(f"{k}: {counts[k]}" for k in np.flatnonzero(counts) if k)
+    print(f"{out}: {'×'.join(map(str, labels.data.shape))} {labels.data.dtype} labels (z, y, x) of {vz:g}×{vy:g}×{vx:g} mm, "
+          f"voxels per label {{{present}}}, {seconds:.2f} s; central slice {png}")
     return 0
 
 

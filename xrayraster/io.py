@@ -42,11 +42,13 @@ def atomic_write(path, write) -> Path:
 
 def write_tiff(path, data: np.ndarray, *, axes: str, pixel_size_mm: tuple[float, float], info: dict,
                spacing_mm: float | None = None) -> Path:
-    """Float32 ImageJ hyperstack (Fiji reads axes and mm scale: ``pixel_size_mm`` (y, x) and, for
-    volumes, the slice ``spacing_mm``); ``info`` goes in as JSON."""
+    """ImageJ hyperstack (Fiji reads axes and mm scale: ``pixel_size_mm`` (y, x) and, for
+    volumes, the slice ``spacing_mm``); ``info`` goes in as JSON. uint8 and uint16 (labels) are
+    written as they are, anything else as float32."""
     import tifffile
 
-    data = np.ascontiguousarray(data, dtype=np.float32)
+    keep = data.dtype in (np.uint8, np.uint16)
+    data = np.ascontiguousarray(data, dtype=data.dtype if keep else np.float32)
     metadata = {"axes": axes, "unit": "mm", "Info": json.dumps(info, indent=1)}
     if spacing_mm is not None:
         metadata["spacing"] = float(spacing_mm)

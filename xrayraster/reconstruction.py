@@ -169,67 +169,80 @@ def _size(nbytes: int) -> str:
 
 
 def _reconstruct(ctx: CLContext, stack, views: FDKViews, response, volume: VolumeGeometry, memory_limit) -> np.ndarray:
-    import pyopencl as cl
-
     info = ctx.info
     device_bytes = int(info.global_mem * DEVICE_SHARE) if memory_limit is None else int(memory_limit)
-    n = len(response)
-    plan = plan_memory(views, volume, n, device_bytes, info.max_alloc, info.local_mem, available_memory())
-    num_views = len(views.scale)
+    plan = plan_memory(views, volume, len(response), device_bytes, info.max_alloc, info.local_mem, available_memory())
     rows, cols = views.detector_shape
-    nz, ny, nx = volume.shape
     log.info("FDK on %s: %d views of %d×%d, volume %s, %d-view batches, %d-plane slabs, filtered views %s",
-             info.name, num_views, rows, cols, volume.shape, plan.batch, plan.slab,
+             info.name, len(views.scale), rows, cols, volume.shape, plan.batch, plan.slab,
              "on the device" if plan.resident else "in host memory")
-
-    # Stage 1: weight and filter, batch by batch.
     layout = {"COLUMN_MAJOR": 1} if _column_major(info, LAYOUT) else {}
+    batches = [range(start, min(start + plan.batch, len(views.scale))) for start in range(0, len(views.scale), plan.batch)]
+    filtered = _filter(ctx, stack, views, response, plan, layout, batches)
+    try:
+        return _backproject(ctx, filtered, views, volume, plan, layout, batches)
+    finally:
+        for buffer in filtered if plan.resident else ():
+            buffer.release()
+
+
+def _filter(ctx: CLContext, stack, views: FDKViews, response, plan: _Plan, layout: dict, batches):
+    """Stage 1, batch by batch: pre-weight and ramp-filter every row. Returns one device buffer
+    per batch (``plan.resident``), else a host array (views, rows + 2, cols + 2)."""
+    import pyopencl as cl
+
+    n = len(response)
+    rows, cols = views.detector_shape
     defines = {**layout, **({"BUF": "__global", "GLOBAL_SCRATCH": 1} if plan.global_scratch else {})}
-    filter_kernel = ctx.kernel("fdk_filter.cl", "filter_rows", defines)
+    kernel = ctx.kernel("fdk_filter.cl", "filter_rows", defines)
     bits = int(math.log2(n))
     reverse = np.array([int(f"{k:0{bits}b}"[::-1], 2) for k in range(n)])
     response_dev = ctx.buffer((response[reverse] / n).astype(np.float32), "r")
-    k = np.arange(n // 2)
-    twiddle_dev = ctx.buffer(np.exp(-2j * np.pi * k / n).astype(np.complex64), "r")
+    twiddle_dev = ctx.buffer(np.exp(-2j * np.pi * np.arange(n // 2) / n).astype(np.complex64), "r")
     geo = _view_geometry(views)
     pairs = (rows + 1) // 2
-    lsize = int(min(info.max_work_group, n // 2, 256))
-    filtered_bytes = (rows + 2) * (cols + 2) * 4
-    batches = [range(start, min(start + plan.batch, num_views)) for start in range(0, num_views, plan.batch)]
-    filtered_dev, filtered_host = [], None
-    if not plan.resident:
-        filtered_host = np.empty((num_views, rows + 2, cols + 2), np.float32)
+    lsize = int(min(ctx.info.max_work_group, n // 2, 256))
+    view_bytes = (rows + 2) * (cols + 2) * 4
+    out = [] if plan.resident else np.empty((len(views.scale), rows + 2, cols + 2), np.float32)
     for batch in batches:
         count = len(batch)
         raw_dev = ctx.buffer(stack[batch.start : batch.stop], "r")
-        # The pad lets backproject_windowed read its 32-row window past the last column.
-        out_dev = ctx.buffer(count * filtered_bytes + WINDOW_PAD)
-        cl.enqueue_fill_buffer(ctx.queue, out_dev, np.float32(0), 0, count * filtered_bytes + WINDOW_PAD)
+        # The pad lets backproject_windowed read its row window past the last column.
+        out_dev = ctx.buffer(count * view_bytes + WINDOW_PAD)
+        cl.enqueue_fill_buffer(ctx.queue, out_dev, np.float32(0), 0, count * view_bytes + WINDOW_PAD)
         red_dev = ctx.buffer(views.redundancy[batch.start : batch.stop].astype(np.float32), "r")
         geo_dev = ctx.buffer(geo[batch.start : batch.stop], "r")
-        scratch = (ctx.buffer(count * pairs * n * 8) if plan.global_scratch else cl.LocalMemory(n * 8))
-        filter_kernel(ctx.queue, (count * pairs * lsize,), (lsize,), raw_dev, out_dev, red_dev, geo_dev, response_dev,
-                      twiddle_dev, scratch, np.int32(rows), np.int32(cols), np.int32(n), np.int32(views.beam == "cone"))
-        raw_dev.release()
+        scratch = ctx.buffer(count * pairs * n * 8) if plan.global_scratch else cl.LocalMemory(n * 8)
+        kernel(ctx.queue, (count * pairs * lsize,), (lsize,), raw_dev, out_dev, red_dev, geo_dev, response_dev,
+               twiddle_dev, scratch, np.int32(rows), np.int32(cols), np.int32(n), np.int32(views.beam == "cone"))
         if plan.resident:
-            filtered_dev.append(out_dev)
+            out.append(out_dev)
         else:
-            cl.enqueue_copy(ctx.queue, filtered_host[batch.start : batch.stop], out_dev)
+            cl.enqueue_copy(ctx.queue, out[batch.start : batch.stop], out_dev)
             out_dev.release()
+    return out
 
-    # Stage 2: backproject slab by slab.
+
+def _backproject(ctx: CLContext, filtered, views: FDKViews, volume: VolumeGeometry, plan: _Plan, layout: dict,
+                 batches) -> np.ndarray:
+    """Stage 2, slab by slab: every view's filtered rows into the voxels. Returns (z, y, x) mm⁻¹."""
+    import pyopencl as cl
+
+    rows, cols = views.detector_shape
+    nz, ny, nx = volume.shape
     matrices = views.matrices
     upright = not np.any(matrices[:, :, 2][:, [0, 2]])  # column and depth constant along z
     # As many float8s per work-item as the slab fills, up to MAX_GROUPS (measured best on 2 cores).
     groups = min(MAX_GROUPS, 1 << max(0, math.ceil(math.log2(-(-plan.slab // 8)))))
     defines = {"ZCHUNK": ZCHUNK, "GROUPS": groups, **layout, **({"UPRIGHT": 1} if upright else {})}
-    bp_kernel = None
+    kernel = None
     if VECTORISED and upright and layout:  # compiled only where the device has AVX2
-        bp_kernel = ctx.kernel("fdk_backproject.cl", "backproject_windowed", defines, optional=True)
-    zchunk = 8 * groups if bp_kernel is not None else ZCHUNK
-    bp_kernel = bp_kernel or ctx.kernel("fdk_backproject.cl", "backproject", defines)
-    fits = bp_kernel.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, ctx.device)
+        kernel = ctx.kernel("fdk_backproject.cl", "backproject_windowed", defines, optional=True)
+    zchunk = 8 * groups if kernel is not None else ZCHUNK
+    kernel = kernel or ctx.kernel("fdk_backproject.cl", "backproject", defines)
+    fits = kernel.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, ctx.device)
     tile = TILE if fits >= TILE[0] * TILE[1] else None  # else the driver picks
+    view_bytes = (rows + 2) * (cols + 2) * 4
     out = np.empty(volume.shape, np.float32)
     for z0 in range(0, nz, plan.slab):
         depth = min(plan.slab, nz - z0)
@@ -239,22 +252,20 @@ def _reconstruct(ctx: CLContext, stack, views: FDKViews, response, volume: Volum
         shifted[:, :, 3] += z0 * matrices[:, :, 2]  # slab-local k
         for number, batch in enumerate(batches):
             if plan.resident:
-                q_dev = filtered_dev[number]
+                q_dev = filtered[number]
             else:
-                q_dev = ctx.buffer(len(batch) * filtered_bytes + WINDOW_PAD, "r")
-                cl.enqueue_copy(ctx.queue, q_dev, filtered_host[batch.start : batch.stop])
+                q_dev = ctx.buffer(len(batch) * view_bytes + WINDOW_PAD, "r")
+                cl.enqueue_copy(ctx.queue, q_dev, filtered[batch.start : batch.stop])
             m_dev = ctx.buffer(shifted[batch.start : batch.stop].reshape(-1, 12).astype(np.float32), "r")
             s_dev = ctx.buffer(views.scale[batch.start : batch.stop].astype(np.float32), "r")
             size = (_round_up(nx, TILE[0]), _round_up(ny, TILE[1]), -(-depth // zchunk))
-            bp_kernel(ctx.queue, size, tile, slab_dev, q_dev, m_dev, s_dev, np.int32(len(batch)), np.int32(rows),
-                      np.int32(cols), np.int32(nx), np.int32(ny), np.int32(depth))
+            kernel(ctx.queue, size, tile, slab_dev, q_dev, m_dev, s_dev, np.int32(len(batch)), np.int32(rows),
+                   np.int32(cols), np.int32(nx), np.int32(ny), np.int32(depth))
             if not plan.resident:
                 q_dev.release()
         cl.enqueue_copy(ctx.queue, out[z0 : z0 + depth], slab_dev)
         slab_dev.release()
     ctx.queue.finish()
-    for buffer in filtered_dev:
-        buffer.release()
     return out
 
 

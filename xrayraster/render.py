@@ -75,7 +75,7 @@ class _SceneBuffers:
     revision: int
     ref: np.ndarray
     triangles: moderngl.Buffer  # 3 vec4 per triangle: corners (mm, relative to ref), object in w
-    objects: moderngl.Buffer  # uvec4 per object: channel, drawn in this view, container channel + 1
+    objects: moderngl.Buffer  # uvec4 per object: channel, drawn in this view, container channel + 1, label
     large: moderngl.Buffer  # indirect draw command + indices of the triangles pass 2 draws
     large_corners: moderngl.Buffer  # the six window-space corners pass 2 draws for each
     ranked: list  # SceneObjects by rank
@@ -382,16 +382,34 @@ class Renderer:
 
     # -- overlap resolution: per-pixel crossing lists ---------------------------------------------
 
-    def _render_resolve(self, buffers: _SceneBuffers, rays) -> np.ndarray:
+    def crossing_lists(self, scene: Scene, view: int = 0) -> _SceneBuffers:
+        """Record every crossing of ``view``'s rays in per-pixel lists and return the uploaded
+        scene, for a resolve pass of another stage (the voxelizer). Bound on return: objects (2;
+        per object by rank: channel, 1, 0, label), heads (4), nodes (5), counters (6). Call
+        inside ``self.gl.current()``."""
+        buffers = self._upload(scene)
+        table = np.zeros((len(buffers.ranked), 4), np.uint32)
+        table[:, 0] = buffers.channels
+        table[:, 1] = self._active_objects(buffers, view)
+        table[:, 3] = [o.label for o in buffers.ranked]
+        buffers.objects.write(table.tobytes())
+        self._record_lists(buffers, view_rays(self._render_vec, view, buffers.ref))
+        buffers.objects.bind_to_storage_buffer(2)
+        return buffers
+
+    def empty_lists(self) -> None:
+        """Empty the per-pixel lists after a resolve pass that leaves them (the voxelizer's)."""
         rows, cols = self._render_vec.detector_shape
-        npix = rows * cols
-        nch = buffers.num_channels
+        self._buffers["heads"].write(np.full(rows * cols, _END, np.uint32).tobytes())
+
+    def _record_lists(self, buffers: _SceneBuffers, rays) -> None:
+        """Every crossing into the per-pixel lists, growing the node pool until it holds them."""
+        rows, cols = self._render_vec.detector_shape
         heads = self._buffers.get("heads")
         if heads is None:
-            heads = self._buffers["heads"] = self.gl.ctx.buffer(np.full(npix, _END, np.uint32).tobytes())
-            self._grow_node_pool(4 * npix)
+            heads = self._buffers["heads"] = self.gl.ctx.buffer(np.full(rows * cols, _END, np.uint32).tobytes())
+            self._grow_node_pool(4 * rows * cols)
         counters = self._buffer("counters", 16)
-        lengths = self._buffer("lengths", 4 * nch * npix)
         while True:
             heads.bind_to_storage_buffer(4)
             self._buffers["nodes"].bind_to_storage_buffer(5)
@@ -399,17 +417,25 @@ class Renderer:
             counters.bind_to_storage_buffer(6)
             self._record_crossings(buffers, rays, {"RESOLVE": 1}, {"u_capacity": self._capacity})
             used = int(np.frombuffer(counters.read(size=4), np.uint32)[0])
-            if used > self._capacity:
-                self._grow_node_pool(used)
-                continue
+            if used <= self._capacity:
+                return
+            self._grow_node_pool(used)
+
+    def _render_resolve(self, buffers: _SceneBuffers, rays) -> np.ndarray:
+        rows, cols = self._render_vec.detector_shape
+        npix = rows * cols
+        nch = buffers.num_channels
+        lengths = self._buffer("lengths", 4 * nch * npix)
+        while True:
+            self._record_lists(buffers, rays)
             resolve = self.gl.compute("pathlength_resolve.comp", {"MAX_CROSSINGS": self._max_crossings, "NUM_CHANNELS": nch})
             buffers.objects.bind_to_storage_buffer(2)
             lengths.bind_to_storage_buffer(7)
             resolve["u_size"].value = (cols, rows)
             resolve.run((cols + 7) // 8, (rows + 7) // 8, 1)
             self.gl.ctx.memory_barrier()
-            _, overflow, max_depth, _ = np.frombuffer(counters.read(), np.uint32)
-            if overflow:
+            _, overflow, max_depth, _ = np.frombuffer(self._buffers["counters"].read(), np.uint32)
+            if overflow:  # the pass emptied the lists: record again, with room for the deepest
                 self._max_crossings = int(2 ** np.ceil(np.log2(max_depth)))
                 log.info("path lengths: %d pixels with up to %d crossings; re-rendering", overflow, max_depth)
                 continue
@@ -429,8 +455,7 @@ class Renderer:
             )
         self._buffer("nodes", size)
         self._capacity = capacity
-        # A list cut short by the overflow is in the heads buffer: empty every list.
-        self._buffers["heads"].write(np.full(rows * cols, _END, np.uint32).tobytes())
+        self.empty_lists()  # a list cut short by the overflow is in the heads buffer
 
 
 def _nesting_columns(scene: Scene, buffers: _SceneBuffers) -> np.ndarray:

@@ -1,5 +1,6 @@
-"""``xrayraster reconstruct``: the geometry from a scan file or from the projections' metadata, the
-volume TIFF Fiji reads (voxel size, units), the same numbers as ``xr.fdk``, and bad input (exit 2)."""
+"""``xrayraster reconstruct`` and ``xrayraster voxelize``: the geometry from a scan file or from the
+projections' metadata, volume TIFFs Fiji reads (voxel size, units), the same numbers as ``xr.fdk``
+and ``xr.voxelize``, and bad input (exit 2)."""
 
 from __future__ import annotations
 
@@ -96,3 +97,28 @@ def test_angles_in_degrees_in_scan_files(tmp_path):
     g, _ = read_scan_file(_scan(tmp_path, geometry=dict(GEOMETRY_JSON, views=4, arc_deg=180, start_deg=10),
                                 volume=VOLUME_JSON))
     assert g.angles == pytest.approx([math.radians(a) for a in (10, 55, 100, 145)])
+
+
+def test_voxelize_writes_labels_fiji_reads(gl, tmp_path, capsys):
+    """``xrayraster voxelize`` on the bundled example: the labels of xr.voxelize, uint8 ZYX with the
+    voxel size in mm, a label table in the metadata, and exit 2 without a volume."""
+    from pathlib import Path
+
+    from xrayraster.config import load_scene_file
+
+    example = Path(__file__).resolve().parent.parent / "examples" / "bracket_and_ball.toml"
+    volume = {"shape": [32, 48, 40], "voxel_size": [0.3, 0.25, 0.3], "offset": [0.0, 0.5, -0.2]}
+    out = tmp_path / "labels.tif"
+    assert cli.main(["voxelize", str(example), "--volume", str(_scan(tmp_path, volume=volume)), "-o", str(out)]) == 0
+    assert "uint8 labels" in capsys.readouterr().out
+    with tifffile.TiffFile(out) as tif:
+        data = tif.asarray()
+        assert tif.series[0].axes == "ZYX" and data.dtype == np.uint8
+        assert tif.imagej_metadata["spacing"] == pytest.approx(0.3) and tif.imagej_metadata["unit"] == "mm"
+    info = read_tiff_info(out)
+    assert info["labels"] == {"1": ["bracket"], "2": ["ball"]}
+    want = xr.voxelize(load_scene_file(example).scene, xr.VolumeGeometry((32, 48, 40), (0.3, 0.25, 0.3), (0.0, 0.5, -0.2)),
+                       context=gl).data
+    assert np.array_equal(data, want) and set(np.unique(data)) == {0, 1, 2}
+    assert cli.main(["voxelize", str(example), "--volume", str(_scan(tmp_path, geometry=GEOMETRY_JSON)), "-o", str(out)]) == 2
+    assert "needs a 'volume'" in capsys.readouterr().err

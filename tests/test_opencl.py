@@ -1,0 +1,50 @@
+"""OpenCL device choice: the fastest by default, by index or name on request (argument or
+XRAYRASTER_CL_DEVICE), and errors that say how to get a driver."""
+
+from __future__ import annotations
+
+import pytest
+
+from xrayraster import opencl
+from xrayraster.opencl import CLContext, DeviceInfo, OpenCLError
+
+
+def _info(index, kind, units, clock=1000, platform="P", name="D"):
+    return DeviceInfo(index, platform, name, kind, units, clock, 2**30, 2**28, 2**15, 256)
+
+
+def test_fastest_prefers_gpus_then_compute(monkeypatch):
+    found = [(_info("0:0", "CPU", 64, name="big cpu"), "cpu"), (_info("1:0", "GPU", 20, name="small gpu"), "gpu"),
+             (_info("1:1", "GPU", 80, name="big gpu"), "gpu2")]
+    monkeypatch.setattr(opencl, "_devices", lambda: found)
+    monkeypatch.delenv("XRAYRASTER_CL_DEVICE", raising=False)
+    assert opencl.choose_device()[0].name == "big gpu"
+    assert opencl.choose_device("0:0")[0].name == "big cpu"
+    assert opencl.choose_device("SMALL")[0].name == "small gpu"
+    monkeypatch.setenv("XRAYRASTER_CL_DEVICE", "cpu")
+    assert opencl.choose_device()[0].name == "big cpu"
+    with pytest.raises(OpenCLError, match=r"'tpu' .* matches none of: 0:0 P / big cpu"):
+        opencl.choose_device("tpu")
+
+
+def test_no_platform_says_how_to_install_pocl(monkeypatch):
+    import pyopencl as cl
+
+    def none():
+        raise cl.LogicError("clGetPlatformIDs failed: PLATFORM_NOT_FOUND_KHR")
+
+    monkeypatch.setattr(cl, "get_platforms", none)
+    with pytest.raises(OpenCLError, match="no OpenCL platform found.*pip install pocl-binary-distribution"):
+        CLContext()
+
+
+def test_the_real_devices_are_listed_and_usable(cl):
+    devices = opencl.list_devices()
+    assert devices and all(d.global_mem > 0 and d.compute_units > 0 for d in devices)
+    again = CLContext(cl.info.index)  # by index, as list_devices prints it
+    assert again.info == cl.info
+    assert again.kernel("fdk_filter.cl", "filter_rows") is again.kernel("fdk_filter.cl", "filter_rows")  # built once
+    assert again.kernel("fdk_filter.cl", "no_such_kernel", optional=True) is None
+    with pytest.raises(OpenCLError, match="has no kernel 'no_such_kernel'"):
+        again.kernel("fdk_filter.cl", "no_such_kernel")
+    again.release()
