@@ -120,5 +120,10 @@ def test_voxelize_writes_labels_fiji_reads(gl, tmp_path, capsys):
     want = xr.voxelize(load_scene_file(example).scene, xr.VolumeGeometry((32, 48, 40), (0.3, 0.25, 0.3), (0.0, 0.5, -0.2)),
                        context=gl).data
     assert np.array_equal(data, want) and set(np.unique(data)) == {0, 1, 2}
+    assert cli.main(["voxelize", str(example), "--volume", str(_scan(tmp_path, volume=volume)), "-o", str(out),
+                     "--fractions", "2"]) == 0
+    shares = tifffile.imread(tmp_path / "labels_fractions.tif")
+    assert shares.shape == (32, 3, 48, 40) and read_tiff_info(tmp_path / "labels_fractions.tif")["channel_labels"] == [0, 1, 2]
+    np.testing.assert_allclose(shares.sum(axis=1), 1.0, atol=1e-6)
     assert cli.main(["voxelize", str(example), "--volume", str(_scan(tmp_path, geometry=GEOMETRY_JSON)), "-o", str(out)]) == 2
     assert "needs a 'volume'" in capsys.readouterr().err

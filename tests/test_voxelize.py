@@ -8,7 +8,7 @@ import pytest
 import trimesh
 
 import xrayraster as xr
-from xrayraster.voxelize import VoxelizeError, voxelize
+from xrayraster.label_volume import VoxelizeError, voxelize
 
 VOLUME = xr.VolumeGeometry((48, 56, 64), (0.25, 0.22, 0.2), offset=(0.1, -0.2, 0.15))
 POINTS = 100_000
@@ -204,3 +204,38 @@ def test_labels_line_up_with_the_fdk_reconstruction(gl, cl, render):
     print(f"{len(offsets)} face crossings: |half-maximum − label boundary| median {np.median(offsets):.3f}, "
           f"max {offsets.max():.3f} voxel")
     assert len(offsets) > 300 and offsets.max() <= 0.5
+
+
+def test_fractions_are_partial_volumes(gl):
+    """k³ sub-voxel centres: a box whose faces cut voxels in half gives 0.5 there, shares add to
+    1, the majority label is the hard label away from surfaces, and a sphere's summed share is
+    its volume far closer than the hard labels' count."""
+    volume = xr.VolumeGeometry((10, 12, 14), 0.5)
+    scene = xr.Scene()
+    scene.add(trimesh.creation.box((3.5, 2.0, 2.5)), "m", label=3)  # x faces at ±1.75: through voxel centres
+    soft = voxelize(scene, volume, fractions=4, context=gl)
+    assert soft.labels == (0, 3) and soft.fractions.shape == (2, 10, 12, 14) and soft.fractions.dtype == np.float32
+    np.testing.assert_allclose(soft.fractions.sum(axis=0), 1.0, atol=1e-6)
+    x = volume.axis_centres(2)
+    k, j = 5, 6  # a voxel row through the middle of the box
+    edge = int(np.argmin(np.abs(x - 1.75)))
+    assert soft.fractions[1, k, j, edge] == pytest.approx(0.5) and soft.fractions[1, k, j, edge - 1] == 1.0
+    hard = voxelize(scene, volume, context=gl).data
+    assert np.array_equal(soft.data[soft.fractions.max(axis=0) == 1.0], hard[soft.fractions.max(axis=0) == 1.0])
+    ball = xr.Scene()
+    sphere = trimesh.creation.icosphere(subdivisions=5, radius=2.1)
+    ball.add(sphere, "m", label=1)
+    grid = xr.VolumeGeometry((12, 12, 12), 0.4)
+    soft_error = abs(voxelize(ball, grid, fractions=8, context=gl).fractions[1].sum() * 0.4**3 - sphere.volume)
+    hard_error = abs(np.count_nonzero(voxelize(ball, grid, context=gl).data) * 0.4**3 - sphere.volume)
+    print(f"sphere volume error: hard labels {hard_error:.4f}, 8³ fractions {soft_error:.4f} mm³")
+    assert soft_error < 0.1 * hard_error
+
+
+def test_tiles_give_the_same_labels(gl, monkeypatch):
+    from xrayraster import label_volume as module
+
+    scene, _ = _scene(CASES["moved sample"])
+    whole = voxelize(scene, VOLUME, context=gl).data
+    monkeypatch.setattr(module, "TILE_COLUMNS", 20)  # 3 × 4 tiles of the 56 × 64 columns
+    assert np.array_equal(voxelize(scene, VOLUME, context=gl).data, whole)

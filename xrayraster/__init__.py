@@ -13,7 +13,7 @@ from .render import RenderError, Renderer
 from .scene import Scene, SceneError, SceneObject
 from .spectrum import Spectrum, SpectrumError
 from .transform import Transform
-from .voxelize import LabelVolume, VoxelizeError, voxelize
+from .label_volume import LabelVolume, VoxelizeError, voxelize
 
 __version__ = "0.1.0"
 

@@ -28,7 +28,7 @@ from .ramp_filter import FILTERS
 from .reconstruction import INPUTS, ReconstructionError, fdk
 from .render import Renderer, RenderError
 from .scene import SceneError
-from .voxelize import VoxelizeError, voxelize
+from .label_volume import VoxelizeError, voxelize
 from .spectrum import SpectrumError
 
 USER_ERRORS = (
@@ -75,6 +75,9 @@ def main(argv=None) -> int:
                      help="scan file whose 'volume' gives the voxel grid (docs/reconstruction.md)")
     vox.add_argument("-o", "--out", dest="out", metavar="LABELS.tif", type=Path, required=True,
                      help="uint8 (uint16 above 255 labels) TIFF (z, y, x); a PNG of the central slice goes beside it")
+    vox.add_argument("--fractions", metavar="K", type=int, default=None,
+                     help="also write partial-volume shares per label from K×K×K sub-voxels (float32 (z, label, y, x), "
+                          "OUT_fractions.tif)")
     vox.add_argument("-v", "--verbose", action="store_true")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(message)s")
@@ -269,7 +272,7 @@ def _voxelize(args) -> int:
     loaded = load_scene_file(args.scene)
     _, volume = read_scan_file(args.volume)
     start = time.perf_counter()
-    labels = voxelize(loaded.scene, volume)
+    labels = voxelize(loaded.scene, volume, fractions=args.fractions)
     seconds = time.perf_counter() - start
     names: dict[int, list[str]] = {}
     for o in loaded.scene.objects:
@@ -282,6 +285,12 @@ def _voxelize(args) -> int:
         "volume_geometry": repr(volume),
         "scene_file": str(args.scene),
     })
+    if labels.fractions is not None:
+        shares = args.out.with_name(f"{args.out.stem}_fractions.tif")
+        # ImageJ hyperstacks are ordered T Z C Y X: one channel per label.
+        write_tiff(shares, labels.fractions.transpose(1, 0, 2, 3), axes="ZCYX", pixel_size_mm=(vy, vx), spacing_mm=vz,
+                   info={"quantity": f"share of each voxel owned by each label, from {args.fractions}³ sub-voxel centres",
+                         "axes": "z, label, y, x", "channel_labels": list(labels.labels), "volume_geometry": repr(volume)})
     png = write_quicklook(args.out.with_suffix(".png"), labels.data[labels.data.shape[0] // 2].astype(np.float32))
     counts = np.bincount(labels.data.ravel())
     present = ", ".join(f"{k}: {counts[k]}" for k in np.flatnonzero(counts) if k)
