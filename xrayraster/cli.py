@@ -5,6 +5,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import sys
 import time
@@ -222,14 +223,10 @@ def _reconstruct(args) -> int:
             info_text = (tif.imagej_metadata or {}).get("Info")
     except (OSError, ValueError) as exc:
         raise ConfigError(f"{args.projections}: cannot read a TIFF stack ({exc})") from None
-    info = {}
-    if info_text:
-        import json
-
-        try:
-            info = json.loads(info_text)
-        except json.JSONDecodeError:
-            info = {}
+    try:
+        info = json.loads(info_text) if info_text else {}
+    except json.JSONDecodeError:
+        info = {}  # a TIFF from elsewhere: the scan file must then give the geometry
     if info.get("quantity") == "path length":
         raise ConfigError(f"{args.projections} holds path lengths per material; reconstruct radiographs "
                           "(xrayraster render without --path-lengths)")

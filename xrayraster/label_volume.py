@@ -24,7 +24,8 @@ crosses that object's surface as the projections saw it.
 Labels are uint8 when every label is below 256, else uint16. Memory: the volume is cut into
 (x, y) tiles of at most TILE_COLUMNS² columns, whose crossing lists take 16 bytes a crossing,
 and each tile's slices are resolved and read back in slabs of ``slab_bytes``; slices the scene
-does not reach are left 0 without work. So the output array, not the GPU, bounds the size.
+does not reach are left 0, and objects outside a tile's box are not tested, without work. So
+the output array, not the GPU, bounds the size.
 """
 
 from __future__ import annotations
@@ -157,8 +158,11 @@ def _label_tile(scene: Scene, volume: VolumeGeometry, out: np.ndarray, gl: GLCon
     if first >= last:
         return
     slices = max(per_word, (slab_bytes // (4 * ny * nx)) * per_word)  # a multiple of per_word
+    box_lo, box_hi = volume.bounds
     with Renderer(column_geometry(volume), overlap="resolve", context=gl) as renderer, renderer.gl.current():
-        buffers = renderer.crossing_lists(scene)
+        # An object beside the tile, or wholly above or below it, adds no crossing that counts.
+        buffers = renderer.crossing_lists(scene, skip=lambda o: bool(np.any(o.mesh.bounds[0] > box_hi)
+                                                                     or np.any(o.mesh.bounds[1] < box_lo)))
         ctx = renderer.gl.ctx
         t_first = float(z[0] - buffers.ref[2])  # t of slice 0, mm from the rays' origin plane
         words = ctx.buffer(reserve=4 * ny * nx * (slices // per_word))

@@ -382,15 +382,18 @@ class Renderer:
 
     # -- overlap resolution: per-pixel crossing lists ---------------------------------------------
 
-    def crossing_lists(self, scene: Scene, view: int = 0) -> _SceneBuffers:
+    def crossing_lists(self, scene: Scene, view: int = 0, skip=None) -> _SceneBuffers:
         """Record every crossing of ``view``'s rays in per-pixel lists and return the uploaded
-        scene, for a resolve pass of another stage (the voxelizer). Bound on return: objects (2;
-        per object by rank: channel, 1, 0, label), heads (4), nodes (5), counters (6). Call
-        inside ``self.gl.current()``."""
+        scene, for a resolve pass of another stage (the voxelizer). Objects for which
+        ``skip(object)`` is true are not tested. Bound on return: objects (2; per object by
+        rank: channel, drawn, 0, label), heads (4), nodes (5), counters (6). Call inside
+        ``self.gl.current()``."""
         buffers = self._upload(scene)
         table = np.zeros((len(buffers.ranked), 4), np.uint32)
         table[:, 0] = buffers.channels
         table[:, 1] = self._active_objects(buffers, view)
+        if skip is not None:
+            table[:, 1] *= [not skip(o) for o in buffers.ranked]
         table[:, 3] = [o.label for o in buffers.ranked]
         buffers.objects.write(table.tobytes())
         self._record_lists(buffers, view_rays(self._render_vec, view, buffers.ref))
