@@ -117,7 +117,7 @@ def _with_fractions(scene, volume, k, labels, dtype, gl, slab_bytes) -> LabelVol
     """Labels on the k-times finer grid, slab of coarse slices by slab, averaged per label."""
     nz, ny, nx = volume.shape
     classes = [0, *labels]
-    lookup = np.zeros(classes[-1] + 1, np.int64)
+    lookup = np.zeros(classes[-1] + 1, np.uint16)  # label -> class index, small to map whole slabs
     lookup[classes] = np.arange(len(classes))
     shares = np.zeros((len(classes), nz, ny, nx), np.float32)
     step = max(1, slab_bytes // (k**3 * ny * nx * np.dtype(dtype).itemsize))  # coarse slices at a time
