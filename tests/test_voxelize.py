@@ -239,3 +239,16 @@ def test_tiles_give_the_same_labels(gl, monkeypatch):
     whole = voxelize(scene, VOLUME, context=gl).data
     monkeypatch.setattr(module, "TILE_COLUMNS", 20)  # 3 × 4 tiles of the 56 × 64 columns
     assert np.array_equal(voxelize(scene, VOLUME, context=gl).data, whole)
+
+
+@pytest.mark.parametrize("scale", [1e-3, 1e3])
+def test_labels_do_not_depend_on_the_unit_size(gl, scale):
+    """The overlapping scene and grid scaled to micrometres or metres: the same labels."""
+    scene, _ = _scene(CASES["overlapping"])
+    want = voxelize(scene, VOLUME, context=gl).data
+    scaled = xr.Scene()
+    for o in scene.objects:
+        scaled.add((o.mesh.vertices * scale, o.mesh.faces), "m", label=o.label, priority=o.priority)
+    vol = xr.VolumeGeometry(VOLUME.shape, tuple(v * scale for v in VOLUME.voxel_size), tuple(o * scale for o in VOLUME.offset))
+    got = voxelize(scaled, vol, context=gl).data
+    assert np.array_equal(got, want)  # measured: identical (float32 rounding is relative to the scene size)
