@@ -1,5 +1,6 @@
-"""Label volumes against independent inside tests (trimesh's signed distance), an exact lattice
-count for a sphere, the FDK reconstruction of the same scene, and bad input."""
+"""Label volumes against independent inside tests (trimesh's ray parity, with its signed distance
+for any centre that disagrees), an exact lattice count for a sphere, the FDK reconstruction of
+the same scene, and bad input."""
 
 from __future__ import annotations
 
@@ -51,27 +52,35 @@ def _scene(parts):
     return scene, placed
 
 
-def _random_voxels(volume, count, seed):
+def _random_voxels(volume, count, seed, bounds=None):
+    """``count`` random voxel indices (k, j, i) and their centres (x, y, z) mm, drawn among the
+    voxels whose centres lie in ``bounds`` ((2, 3) mm box; default: all)."""
     rng = np.random.default_rng(seed)
-    idx = np.stack([rng.integers(0, n, count) for n in volume.shape], axis=1)  # (k, j, i)
-    centres = np.stack([volume.axis_centres(2)[idx[:, 2]], volume.axis_centres(1)[idx[:, 1]],
-                        volume.axis_centres(0)[idx[:, 0]]], axis=1)
+    axes = [volume.axis_centres(a) for a in range(3)]  # z, y, x
+    ranges = [np.arange(len(c)) for c in axes]
+    if bounds is not None:
+        ranges = [r[(c >= bounds[0][2 - a]) & (c <= bounds[1][2 - a])] for a, (r, c) in enumerate(zip(ranges, axes))]
+    idx = np.stack([rng.choice(r, count) for r in ranges], axis=1)
+    centres = np.stack([axes[2][idx[:, 2]], axes[1][idx[:, 1]], axes[0][idx[:, 0]]], axis=1)
     return idx, centres
 
 
-def _reference_labels(placed, points, voxel_mm):
-    """Label by trimesh's signed distance (positive inside), and whether every surface is far."""
+def _reference_labels(placed, points):
+    """Label by trimesh's ray-parity inside test (Trimesh.contains), priority rule applied."""
     label = np.zeros(len(points), np.int64)
     best = np.full(len(points), -np.inf)
-    far = np.ones(len(points), bool)
     for number, (mesh, lab, priority) in enumerate(placed):
-        d = trimesh.proximity.signed_distance(mesh, points)
-        far &= np.abs(d) > MIN_DISTANCE * voxel_mm
         rank = priority + 1e-6 * number  # later-added wins ties, as in the scene
-        owns = (d > 0) & (rank > best)
+        owns = mesh.contains(points) & (rank > best)
         label[owns] = lab
         best[owns] = rank
-    return label, far
+    return label
+
+
+def _near_a_surface(placed, points, voxel_mm):
+    """Whether each point lies within MIN_DISTANCE voxel of any object's surface (trimesh)."""
+    distance = np.min([np.abs(trimesh.proximity.signed_distance(m, points)) for m, _, _ in placed], axis=0)
+    return distance <= MIN_DISTANCE * voxel_mm
 
 
 CASES = {
@@ -93,13 +102,15 @@ def test_labels_agree_with_an_independent_inside_test(gl, case):
     scene, placed = _scene(CASES[case])
     labels = voxelize(scene, VOLUME, context=gl)
     assert labels.data.dtype == np.uint8 and labels.data.shape == VOLUME.shape and labels.geometry == VOLUME
-    idx, points = _random_voxels(VOLUME, POINTS, seed=len(case))
-    want, far = _reference_labels(placed, points, min(VOLUME.voxel_size))
+    idx, points = _random_voxels(VOLUME, POINTS, seed=len(case), bounds=scene.bounds + [[-0.5], [0.5]])  # near the objects
+    want = _reference_labels(placed, points)
     got = labels.data[idx[:, 0], idx[:, 1], idx[:, 2]]
-    assert far.sum() >= 0.99 * POINTS
-    wrong = np.flatnonzero(far & (got != want))
-    assert wrong.size == 0, f"{wrong.size} of {far.sum()} voxels disagree, e.g. at {points[wrong[:3]]}: {got[wrong[:3]]} vs {want[wrong[:3]]}"
-    assert len(np.unique(want[far])) == len({lab for _, lab, _ in placed}) + 1  # every label (and 0) was tested
+    differ = np.flatnonzero(got != want)
+    # Only centres within 1e-3 voxel of a surface may differ (either inside test may go either way there).
+    wrong = differ[~_near_a_surface(placed, points[differ], min(VOLUME.voxel_size))] if differ.size else differ
+    assert wrong.size == 0, f"{wrong.size} of {POINTS} voxels disagree, e.g. at {points[wrong[:3]]}: {got[wrong[:3]]} vs {want[wrong[:3]]}"
+    assert differ.size <= 1e-3 * POINTS
+    assert set(np.unique(want)) == {0} | {lab for _, lab, _ in placed}  # every label (and 0) was tested
 
 
 def test_sphere_count_is_the_exact_lattice_count_and_the_volume(gl):
