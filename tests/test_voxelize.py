@@ -4,6 +4,8 @@ the same scene, and bad input."""
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 import trimesh
@@ -97,13 +99,22 @@ CASES = {
 }
 
 
-@pytest.mark.parametrize("case", sorted(CASES))
-def test_labels_agree_with_an_independent_inside_test(gl, case):
+@functools.lru_cache(maxsize=None)
+def _reference_sample(case):
+    """Voxel indices, centres and reference labels of POINTS centres near the case's objects
+    (computed once per case: both methods are checked against the same sample)."""
     scene, placed = _scene(CASES[case])
-    labels = voxelize(scene, VOLUME, context=gl)
+    idx, points = _random_voxels(VOLUME, POINTS, seed=len(case), bounds=scene.bounds + [[-0.5], [0.5]])
+    return idx, points, _reference_labels(placed, points)
+
+
+@pytest.mark.parametrize("method", ["exact", "stencil"])
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_labels_agree_with_an_independent_inside_test(gl, case, method):
+    scene, placed = _scene(CASES[case])
+    labels = voxelize(scene, VOLUME, method=method, context=gl)
     assert labels.data.dtype == np.uint8 and labels.data.shape == VOLUME.shape and labels.geometry == VOLUME
-    idx, points = _random_voxels(VOLUME, POINTS, seed=len(case), bounds=scene.bounds + [[-0.5], [0.5]])  # near the objects
-    want = _reference_labels(placed, points)
+    idx, points, want = _reference_sample(case)
     got = labels.data[idx[:, 0], idx[:, 1], idx[:, 2]]
     differ = np.flatnonzero(got != want)
     # Only centres within 1e-3 voxel of a surface may differ (either inside test may go either way there).
@@ -176,6 +187,8 @@ def test_bad_input(gl):
         xr.Scene().add(trimesh.creation.box((1.0, 1.0, 1.0)), "m", label=70000)
     scene = xr.Scene()
     scene.add(trimesh.creation.box((1.0, 1.0, 1.0)), "m")
+    with pytest.raises(VoxelizeError, match="method must be"):
+        voxelize(scene, xr.VolumeGeometry((4, 4, 4), 0.5), method="stencil", fractions=2, context=gl)
     with pytest.raises(VoxelizeError, match="GiB"):
         voxelize(scene, xr.VolumeGeometry((20000, 20000, 20000), 0.1), context=gl)
 

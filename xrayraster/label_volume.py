@@ -74,12 +74,17 @@ def column_geometry(volume: VolumeGeometry) -> VectorGeometry:
     return VectorGeometry("parallel", (ny, nx), [[0.0, 0.0, 1.0, ox, oy, oz, vx, 0.0, 0.0, 0.0, vy, 0.0]])
 
 
-def voxelize(scene: Scene, volume: VolumeGeometry, *, fractions: int | None = None, context: GLContext | None = None,
-             slab_bytes: int = SLAB_BYTES) -> LabelVolume:
+METHODS = ("exact", "stencil")
+
+
+def voxelize(scene: Scene, volume: VolumeGeometry, *, fractions: int | None = None, method: str = "exact",
+             context: GLContext | None = None, slab_bytes: int = SLAB_BYTES) -> LabelVolume:
     """The label of the object owning each voxel centre of ``volume`` (see the module docstring).
 
     ``fractions=k``: also the partial-volume share of every label in each voxel, from the k³
     centres of a regular k×k×k sub-grid (soft labels; cost and memory ∝ k³ per slab).
+    ``method="stencil"``: the classic slice-by-slice stencil counting instead
+    (:mod:`xrayraster.label_stencil`; kept to compare against, no fractions).
     """
     if not isinstance(scene, Scene):
         raise VoxelizeError(f"expected a Scene, got {type(scene).__name__}")
@@ -87,6 +92,8 @@ def voxelize(scene: Scene, volume: VolumeGeometry, *, fractions: int | None = No
         raise VoxelizeError(f"volume must be a VolumeGeometry, got {type(volume).__name__}")
     if fractions is not None and (int(fractions) != fractions or not 1 <= fractions <= 16):
         raise VoxelizeError(f"fractions must be a sub-voxel count per axis from 1 to 16, got {fractions!r}")
+    if method not in METHODS or (method == "stencil" and fractions):
+        raise VoxelizeError(f"method must be 'exact' or 'stencil' (the latter without fractions), got {method!r}")
     scene.require_objects()
     labels = sorted({o.label for o in scene.objects})
     dtype = np.uint8 if labels[-1] < 256 else np.uint16
@@ -102,6 +109,10 @@ def voxelize(scene: Scene, volume: VolumeGeometry, *, fractions: int | None = No
     owns = context is None
     gl = context or GLContext()
     try:
+        if method == "stencil":
+            from .label_stencil import voxelize_stencil  # it imports this module
+
+            return voxelize_stencil(scene, volume, dtype, gl)
         if fractions:
             return _with_fractions(scene, volume, int(fractions), labels, dtype, gl, slab_bytes)
         out = np.zeros(volume.shape, dtype)
