@@ -20,16 +20,21 @@ def _require(capability: str, reason: str) -> None:
     pytest.skip(reason)
 
 
+def _context(capability: str, make, error):
+    """Yield ``make()``, released afterwards; skip (or fail, see _require) when it raises ``error``."""
+    try:
+        ctx = make()
+    except error as exc:
+        _require(capability, str(exc))
+    yield ctx
+    ctx.release()
+
+
 @pytest.fixture(scope="session")
 def gl():
     from xrayraster import GLContext, GLContextError
 
-    try:
-        ctx = GLContext()
-    except GLContextError as exc:
-        _require("GL", str(exc))
-    yield ctx
-    ctx.release()
+    yield from _context("GL", GLContext, GLContextError)
 
 
 @pytest.fixture(scope="session")
@@ -37,12 +42,7 @@ def osmesa():
     """A context on the OSMesa fallback backend (libosmesa6)."""
     from xrayraster import GLContext, GLContextError
 
-    try:
-        ctx = GLContext("osmesa")
-    except GLContextError as exc:
-        _require("OSMESA", str(exc))
-    yield ctx
-    ctx.release()
+    yield from _context("OSMESA", lambda: GLContext("osmesa"), GLContextError)
 
 
 @pytest.fixture(scope="session")
@@ -50,12 +50,7 @@ def cl():
     """An OpenCL context on the default device (PoCL on a CPU machine)."""
     from xrayraster.opencl import CLContext, OpenCLError
 
-    try:
-        ctx = CLContext()
-    except OpenCLError as exc:
-        _require("OPENCL", str(exc))
-    yield ctx
-    ctx.release()
+    yield from _context("OPENCL", CLContext, OpenCLError)
 
 
 @pytest.fixture
