@@ -276,3 +276,19 @@ def test_labels_do_not_depend_on_the_unit_size(gl, scale):
     vol = xr.VolumeGeometry(VOLUME.shape, tuple(v * scale for v in VOLUME.voxel_size), tuple(o * scale for o in VOLUME.offset))
     got = voxelize(scaled, vol, context=gl).data
     assert np.array_equal(got, want)  # measured: identical (float32 rounding is relative to the scene size)
+
+
+def test_columns_with_more_crossings_than_the_first_pass_holds(gl):
+    """12 separate plates stacked along z: 24 crossings a column, more than the 16 the resolve
+    pass first makes room for; it widens and runs again, and every plate is where it should be."""
+    scene = xr.Scene()
+    for n in range(12):  # plate n spans z in [n − 5.75, n − 5.25] mm
+        scene.add(trimesh.creation.box((3.0, 3.0, 0.5)), "m", label=n + 1,
+                  transform=xr.Transform.translation((0.0, 0.0, n - 5.5)))
+    volume = xr.VolumeGeometry((48, 4, 4), 0.25)  # centres at z = ±0.125, ±0.375, ...
+    labels = voxelize(scene, volume, context=gl).data
+    z = volume.axis_centres(0)
+    plate = np.floor(z + 5.75)
+    want = np.where((plate >= 0) & (plate < 12) & (np.abs(z - (plate - 5.5)) < 0.25), plate + 1, 0)
+    assert np.array_equal(labels[:, 1, 1], want) and np.array_equal(labels[:, 2, 2], want)
+    assert set(np.unique(want)) == set(range(13))

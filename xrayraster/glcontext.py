@@ -95,6 +95,18 @@ class GLContext:
                 )
         return self._programs[key]
 
+    def function(self, name: str, restype, argtypes):
+        """A raw GL entry point as a ctypes function, for what moderngl does not wrap (stencil
+        operations), or None when the driver lacks it. Call it inside :meth:`current`."""
+        if self.backend == "osmesa":
+            pointer = self._osmesa.load_opengl_function(name)
+        else:
+            egl = ctypes.CDLL(ctypes.util.find_library("EGL") or "libEGL.so.1")
+            egl.eglGetProcAddress.restype = ctypes.c_void_p
+            egl.eglGetProcAddress.argtypes = [ctypes.c_char_p]
+            pointer = egl.eglGetProcAddress(name.encode())
+        return ctypes.CFUNCTYPE(restype, *argtypes)(pointer) if pointer else None
+
     def compute(self, name: str, defines: dict | None = None) -> moderngl.ComputeShader:
         key = (name, tuple(sorted((defines or {}).items())))
         if key not in self._programs:

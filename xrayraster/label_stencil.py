@@ -16,7 +16,6 @@ moderngl has no stencil API, so the few stencil calls go to the driver directly.
 from __future__ import annotations
 
 import ctypes
-import ctypes.util
 
 import numpy as np
 
@@ -41,21 +40,12 @@ _SIGNATURES = {
 
 
 def _gl_functions(gl: GLContext) -> dict:
-    """The raw GL entry points above, from the context's own loader (OSMesa) or EGL's."""
-    if gl.backend == "osmesa":
-        address = gl._osmesa.load_opengl_function
-    else:
-        egl = ctypes.CDLL(ctypes.util.find_library("EGL") or "libEGL.so.1")
-        egl.eglGetProcAddress.restype = ctypes.c_void_p
-        egl.eglGetProcAddress.argtypes = [ctypes.c_char_p]
-        address = lambda name: egl.eglGetProcAddress(name.encode())  # noqa: E731
+    """The raw GL entry points above (moderngl has no stencil API)."""
     out = {}
     for name, argtypes in _SIGNATURES.items():
-        pointer = address(name)
-        if not pointer:
-            raise VoxelizeError(f"the GL driver has no {name}: the stencil voxelizer cannot run here")
-        restype = _U if name == "glCheckFramebufferStatus" else None
-        out[name] = ctypes.CFUNCTYPE(restype, *argtypes)(pointer)
+        out[name] = gl.function(name, _U if name == "glCheckFramebufferStatus" else None, argtypes)
+        if out[name] is None:
+            raise VoxelizeError(f"the GL driver has no {name}: the stencil voxelizer cannot run here; use method='exact'")
     return out
 
 

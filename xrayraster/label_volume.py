@@ -30,7 +30,6 @@ the output array, not the GPU, bounds the size.
 
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass
 
 import numpy as np
@@ -41,7 +40,6 @@ from .render import Renderer
 from .resources import available_memory
 from .scene import Scene
 
-log = logging.getLogger(__name__)
 
 SLAB_BYTES = 64 * 2**20  # label words resolved per pass (GL_MAX_SHADER_STORAGE_BLOCK_SIZE is 128 MiB on llvmpipe)
 TILE_COLUMNS = 512  # columns per side of an (x, y) tile: bounds the crossing lists (16 bytes a crossing)
@@ -150,7 +148,6 @@ def _with_fractions(scene, volume, k, labels, dtype, gl, slab_bytes) -> LabelVol
 def _tiles(volume: VolumeGeometry):
     """(row slice, column slice, sub-volume) tiles of at most TILE_COLUMNS² voxel columns."""
     nz, ny, nx = volume.shape
-    vz, vy, vx = volume.voxel_size
     for j0 in range(0, ny, TILE_COLUMNS):
         for i0 in range(0, nx, TILE_COLUMNS):
             tj, ti = min(TILE_COLUMNS, ny - j0), min(TILE_COLUMNS, nx - i0)
@@ -174,29 +171,15 @@ def _label_tile(scene: Scene, volume: VolumeGeometry, out: np.ndarray, gl: GLCon
         # An object beside the tile, or wholly above or below it, adds no crossing that counts.
         buffers = renderer.crossing_lists(scene, skip=lambda o: bool(np.any(o.mesh.bounds[0] > box_hi)
                                                                      or np.any(o.mesh.bounds[1] < box_lo)))
-        ctx = renderer.gl.ctx
         t_first = float(z[0] - buffers.ref[2])  # t of slice 0, mm from the rays' origin plane
-        words = ctx.buffer(reserve=4 * ny * nx * (slices // per_word))
+        words = renderer.gl.ctx.buffer(reserve=4 * ny * nx * (slices // per_word))
         words.bind_to_storage_buffer(7)
-        counters = renderer._buffers["counters"]
         for k0 in range(first, last, slices):
             count = min(slices, last - k0)
             padded = -(-count // per_word) * per_word
-            while True:
-                resolve = renderer.gl.compute("voxelize_resolve.comp", {
-                    "MAX_CROSSINGS": renderer._max_crossings, "LABELS_PER_WORD": per_word})
-                resolve["u_size"].value = (nx, ny)
-                resolve["u_t0"].value = t_first + k0 * volume.voxel_size[0]
-                resolve["u_dt"].value = volume.voxel_size[0]
-                resolve["u_slices"].value = padded
-                counters.write(np.zeros(4, np.uint32).tobytes())
-                resolve.run((nx + 7) // 8, (ny + 7) // 8, 1)
-                ctx.memory_barrier()
-                _, overflow, depth, _ = np.frombuffer(counters.read(), np.uint32)
-                if not overflow:
-                    break
-                renderer._max_crossings = int(2 ** np.ceil(np.log2(depth)))
-                log.info("voxelize: columns with up to %d crossings; resolving again", depth)
+            renderer.resolve_kept_lists("voxelize_resolve.comp", {"LABELS_PER_WORD": per_word}, {
+                "u_size": (nx, ny), "u_t0": t_first + k0 * volume.voxel_size[0], "u_dt": volume.voxel_size[0],
+                "u_slices": padded})
             raw = np.frombuffer(words.read(size=4 * ny * nx * padded // per_word), np.uint32)
             unpacked = raw.view(out.dtype).reshape(padded // per_word, ny, nx, per_word)
             out[k0 : k0 + count] = unpacked.transpose(0, 3, 1, 2).reshape(padded, ny, nx)[:count]

@@ -41,8 +41,8 @@ MAX_BATCH_VIEWS = 256  # views per backprojection launch: 48 bytes each of const
 # Kernel choices, normally automatic; the tests set them to check every path on one device.
 LAYOUT = "auto"  # filtered views by "rows" (GPUs), by "columns" (CPUs), or "auto" by device type
 VECTORISED = True  # backproject_windowed where it applies (x86 CPUs with AVX2, upright detectors)
-DEVICE_SHARE = 0.8
-WINDOW_PAD = 32 * 4  # bytes after each batch of filtered views (shaders/fdk_backproject.cl)  # of the device's global memory we plan to use
+DEVICE_SHARE = 0.8  # of the device's global memory we plan to use
+WINDOW_PAD = 32 * 4  # bytes after each batch of filtered views: backproject_windowed reads past the last column
 
 
 class ReconstructionError(ValueError):

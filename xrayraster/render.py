@@ -400,6 +400,24 @@ class Renderer:
         buffers.objects.bind_to_storage_buffer(2)
         return buffers
 
+    def resolve_kept_lists(self, shader: str, defines: dict, uniforms: dict) -> None:
+        """Run compute pass ``shader`` (8×8 groups over the pixels; it reads the lists of
+        :meth:`crossing_lists` without emptying them) with room for MAX_CROSSINGS crossings a
+        pixel; where a pixel holds more, it counts an overflow, and the pass runs again wider."""
+        rows, cols = self._render_vec.detector_shape
+        counters = self._buffers["counters"]
+        while True:
+            prog = self.gl.compute(shader, {**defines, "MAX_CROSSINGS": self._max_crossings})
+            _set_uniforms(prog, uniforms)
+            counters.write(np.zeros(4, np.uint32).tobytes())
+            prog.run((cols + 7) // 8, (rows + 7) // 8, 1)
+            self.gl.ctx.memory_barrier()
+            _, overflow, depth, _ = np.frombuffer(counters.read(), np.uint32)
+            if not overflow:
+                return
+            self._max_crossings = int(2 ** np.ceil(np.log2(depth)))
+            log.info("%s: pixels with up to %d crossings; running again", shader, depth)
+
     def empty_lists(self) -> None:
         """Empty the per-pixel lists after a resolve pass that leaves them (the voxelizer's)."""
         rows, cols = self._render_vec.detector_shape
@@ -495,6 +513,3 @@ def _refine(vec: VectorGeometry, k: int) -> VectorGeometry:
     arr[:, 6:12] /= k
     rows, cols = vec.detector_shape
     return VectorGeometry(vec.beam, (rows * k, cols * k), arr)
-
-
-
