@@ -5,7 +5,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import sys
 import time
@@ -19,7 +18,8 @@ from .detector import Detector
 from .geometry import GeometryError
 from .geometry_io import geometry_from_repr, read_scan_file
 from .glcontext import GLContextError
-from .io import write_quicklook, write_tiff
+from .io import read_tiff, write_quicklook, write_tiff
+from .label_volume import VoxelizeError, voxelize
 from .materials import Material, MaterialError
 from .mesh import MeshError
 from .opencl import OpenCLError
@@ -29,7 +29,6 @@ from .ramp_filter import FILTERS
 from .reconstruction import INPUTS, ReconstructionError, fdk
 from .render import Renderer, RenderError
 from .scene import SceneError
-from .label_volume import VoxelizeError, voxelize
 from .spectrum import SpectrumError
 
 USER_ERRORS = (
@@ -214,19 +213,11 @@ def _render_radiographs(args) -> int:
 
 
 def _reconstruct(args) -> int:
-    import tifffile
-
     geometry, volume = read_scan_file(args.geometry)
     try:
-        with tifffile.TiffFile(args.projections) as tif:
-            stack = tif.asarray()
-            info_text = (tif.imagej_metadata or {}).get("Info")
+        stack, info = read_tiff(args.projections)  # info {}: from elsewhere, the scan file gives the geometry
     except (OSError, ValueError) as exc:
         raise ConfigError(f"{args.projections}: cannot read a TIFF stack ({exc})") from None
-    try:
-        info = json.loads(info_text) if info_text else {}
-    except json.JSONDecodeError:
-        info = {}  # a TIFF from elsewhere: the scan file must then give the geometry
     if info.get("quantity") == "path length":
         raise ConfigError(f"{args.projections} holds path lengths per material; reconstruct radiographs "
                           "(xrayraster render without --path-lengths)")

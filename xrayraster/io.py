@@ -58,6 +58,19 @@ def write_tiff(path, data: np.ndarray, *, axes: str, pixel_size_mm: tuple[float,
     )
 
 
+def read_tiff(path) -> tuple[np.ndarray, dict]:
+    """The array of a TIFF and the JSON ``info`` of :func:`write_tiff` ({} for a TIFF from elsewhere)."""
+    import tifffile
+
+    with tifffile.TiffFile(path) as tif:
+        data = tif.asarray()
+        text = (tif.imagej_metadata or {}).get("Info")
+    try:
+        return data, json.loads(text) if text else {}
+    except json.JSONDecodeError:
+        return data, {}
+
+
 def read_tiff_info(path) -> dict:
     """The JSON ``info`` written by :func:`write_tiff`."""
     import tifffile
