@@ -62,6 +62,7 @@ class FDKViews:
     beam: str  # "cone" or "parallel"
     detector_shape: tuple[int, int]  # (rows, cols)
     vectors: np.ndarray  # (views, 12): s|r, d, u, v in mm (cosine weights are computed from them)
+    depth: np.ndarray  # (views,): D, source to detector plane, mm (1 for parallel beams)
     redundancy: np.ndarray  # (views, cols): W of the module docstring
     pixel_pitch: float  # |u|, mm: the ramp filter's sample spacing
     matrices: np.ndarray  # (views, 3, 4): voxel index (i, j, k, 1) -> (col·w, row·w, w)
@@ -116,7 +117,7 @@ def fdk_views(geometry, volume: VolumeGeometry, scan: str = "auto") -> FDKViews:
         depth = np.ones(len(a))
         scale = gaps
     matrices = _projection_matrices(s, d, u, v, normal, depth, cone, volume, (rows, cols))
-    return FDKViews(vec.beam, (rows, cols), a, redundancy, float(pitch[0]), matrices, scale,
+    return FDKViews(vec.beam, (rows, cols), a, depth, redundancy, float(pitch[0]), matrices, scale,
                     "full" if full else "short", displaced)
 
 
@@ -126,12 +127,9 @@ def cosine_weights(views: FDKViews, view: int) -> np.ndarray:
     if views.beam != "cone":
         return np.ones((rows, cols))
     s, d, u, v = np.split(views.vectors[view], 4)
-    normal = np.cross(u, v)
-    normal /= np.linalg.norm(normal)
     r = (np.arange(rows) - (rows - 1) / 2)[:, None, None]
     c = (np.arange(cols) - (cols - 1) / 2)[None, :, None]
-    ray = d + c * u + r * v - s
-    return np.abs(float(normal @ (d - s))) / np.linalg.norm(ray, axis=-1)
+    return views.depth[view] / np.linalg.norm(d + c * u + r * v - s, axis=-1)
 
 
 def _view_angles(s: np.ndarray, cone: bool) -> np.ndarray:

@@ -273,11 +273,8 @@ def _view_geometry(views: FDKViews) -> np.ndarray:
     """(views, 4, 4) float32 per view: s.xyz D, d.xyz 0, u.xyz 0, v.xyz 0 (for cosine weights)."""
     a = views.vectors
     s, d, u, v = a[:, 0:3], a[:, 3:6], a[:, 6:9], a[:, 9:12]
-    normal = np.cross(u, v)
-    normal /= np.linalg.norm(normal, axis=1)[:, None]
-    depth = np.abs(np.einsum("ij,ij->i", normal, d - s))
     geo = np.zeros((len(a), 4, 4), np.float32)
-    geo[:, 0, :3], geo[:, 0, 3] = s, depth
+    geo[:, 0, :3], geo[:, 0, 3] = s, views.depth
     geo[:, 1, :3], geo[:, 2, :3], geo[:, 3, :3] = d, u, v
     return geo
 
