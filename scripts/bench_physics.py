@@ -53,7 +53,7 @@ sys.path.insert(0, str(ROOT / "scripts"))
 
 import xrayraster as xr  # noqa: E402
 from xrayraster import physics  # noqa: E402
-from xrayraster.radiograph import BIN_TOLERANCE, radiograph  # noqa: E402
+from xrayraster.physics.radiograph import BIN_TOLERANCE, radiograph  # noqa: E402
 
 import bench_render as br  # noqa: E402
 from gvxr_peer import gvxr_available, gvxr_linear_attenuation, gvxr_set_materials, gvxr_xray_image  # noqa: E402

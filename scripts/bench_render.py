@@ -250,7 +250,7 @@ def build_scene(level: int) -> BenchScene:
 
 
 # ---------------------------------------------------------------------------------------------
-# Rays and references (straight from the documented convention in xrayraster/geometry.py, not
+# Rays and references (straight from the documented convention in xrayraster/core/geometry.py, not
 # from the renderer's ray set-up, so a frame or offset bug in the renderer shows as an error)
 # ---------------------------------------------------------------------------------------------
 

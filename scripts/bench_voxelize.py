@@ -22,7 +22,7 @@ What is timed
   the shaders; at every size it uploads the scene and sizes the crossing lists); then the best
   of 2 calls (256³, 64³) or 1 call (512³).
 * ours, ``method="stencil"``: the classic slice-by-slice stencil counting in the same GL
-  pipeline (xrayraster/label_stencil.py), one call per size, for comparison.
+  pipeline (xrayraster/gl/voxelize_stencil.py), one call per size, for comparison.
 * VTK: ``scripts/vtk_peer.py``'s ``vtk_voxelize``: one ``vtkPolyDataToImageStencil`` +
   ``vtkImageStencilToImage`` per object on the same grid (VTK's default tolerance), numpy
   views, and the priority painting of the masks. The time compared is the end-to-end label

@@ -53,7 +53,7 @@ _init_error = None     # reason string if initialisation failed
 _scene_key = None      # fingerprint of the meshes currently uploaded
 _labels: dict[str, str] = {}   # material -> gvxr mesh label
 _egl = None            # (libEGL bundled with gvxr, (display, draw, read, context) of gvxr)
-_sys_egl = None        # system libEGL (the one moderngl/glcontext use), if loadable
+_sys_egl = None        # system libEGL (the one moderngl/xrayraster.gl.context use), if loadable
 _EGL_DRAW, _EGL_READ = 0x3059, 0x305A
 
 

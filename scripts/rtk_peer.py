@@ -8,7 +8,7 @@ Geometry mapping (our scanner frame -> RTK's fixed frame, mm)
 -------------------------------------------------------------
 Ours: rotation axis z; at view angle θ the source is at R_z(θ)·(0, −SOD, 0), the detector
 centre at R_z(θ)·(0, SDD − SOD, 0) + ou·û + ov·v̂, columns step along û = R_z(θ)·(1, 0, 0) and
-rows along v̂ = (0, 0, 1) (see xrayraster/geometry.py).
+rows along v̂ = (0, 0, 1) (see xrayraster/core/geometry.py).
 
 RTK (ThreeDCircularProjectionGeometry, documentation/docs/Geometry.md and
 rtkFDKWeightProjectionFilter.hxx): rotation axis y; with gantry angle g the source is at

@@ -8,7 +8,7 @@ Grid mapping (our VolumeGeometry -> VTK's image / stencil geometry, mm)
 ---------------------------------------------------------------------
 Ours: array (z, y, x), shape (nz, ny, nx), voxel_size (vz, vy, vx), offset (oz, oy, ox); the
 centre of voxel (k, j, i) is ((i − (nx−1)/2)·vx + ox, (j − (ny−1)/2)·vy + oy, (k − (nz−1)/2)·vz + oz)
-in the scanner frame (xrayraster/geometry.py).
+in the scanner frame (xrayraster/core/geometry.py).
 
 VTK (vtkImageStencilSource / vtkImageData, identity direction): point (i, j, k) of the image is
 at origin + (i·sx, j·sy, k·sz), indices over the whole extent (i0, i1, j0, j1, k0, k1). So

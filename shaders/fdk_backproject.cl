@@ -1,4 +1,4 @@
-// FDK stage 2: voxel-driven backprojection with bilinear interpolation (xrayraster/reconstruction.py).
+// FDK stage 2: voxel-driven backprojection with bilinear interpolation (xrayraster/recon/fdk.py).
 //
 // Layout of the filtered projections: (views, rows + 2, cols + 2) by default (GPUs: neighbouring
 // work-items read neighbouring columns of one row, coalesced); with COLUMN_MAJOR, (views,

@@ -1,4 +1,4 @@
-// FDK stage 1: pre-weight, zero-pad and ramp-filter detector rows (xrayraster/reconstruction.py).
+// FDK stage 1: pre-weight, zero-pad and ramp-filter detector rows (xrayraster/recon/fdk.py).
 //
 // One work-group filters two rows at once: they go in as the real and imaginary parts of one
 // complex FFT. The ramp response is real and even, so the filtered rows come back separated

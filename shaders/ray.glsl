@@ -1,7 +1,7 @@
 // Shared by the path-length fragment stages: the ray of the pixel under a fragment, and an
 // exact, watertight ray-triangle test (Woop, Benthin & Wald, JCGT 2013) with a tie rule so that
 // a ray through a shared edge or vertex is counted by exactly one triangle of a surface.
-// All positions are float32 offsets from the scene reference point (xrayraster/raysetup.py).
+// All positions are float32 offsets from the scene reference point (xrayraster/gl/rays.py).
 
 uniform vec3 u_origin_num[3];   // ray origin Q = (N0 + c'N1 + r'N2) / (m . (1, c', r'))
 uniform vec3 u_origin_den;

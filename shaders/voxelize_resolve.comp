@@ -1,5 +1,5 @@
 #version 430 core
-// Label pass (xrayraster/label_volume.py): one invocation per voxel column. The column's crossings,
+// Label pass (xrayraster/gl/voxelize.py): one invocation per voxel column. The column's crossings,
 // recorded by the path-length passes in RESOLVE mode for a parallel "view" looking along +z
 // whose pixels are the voxel columns, are sorted and swept upward together with the slab's
 // voxel centres. Below a voxel centre, every crossing changes its object's winding count (entry

@@ -48,7 +48,7 @@ def osmesa():
 @pytest.fixture(scope="session")
 def cl():
     """An OpenCL context on the default device (PoCL on a CPU machine)."""
-    from xrayraster.opencl import CLContext, OpenCLError
+    from xrayraster.recon.opencl import CLContext, OpenCLError
 
     yield from _context("OPENCL", CLContext, OpenCLError)
 

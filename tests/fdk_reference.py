@@ -1,7 +1,7 @@
 """FDK / FBP in plain float64 NumPy: the reference the OpenCL kernels are checked against.
 
-Same algorithm as :mod:`xrayraster.reconstruction` (the per-view arrays of :mod:`xrayraster.fdk_geometry`
-and the response of :mod:`xrayraster.ramp_filter`), written the obvious way: weight, filter
+Same algorithm as :mod:`xrayraster.recon.fdk` (the per-view arrays of :mod:`xrayraster.recon.fdk_weights`
+and the response of :mod:`xrayraster.recon.ramp_filter`), written the obvious way: weight, filter
 each padded row by FFT, backproject every voxel with bilinear interpolation (zero outside the
 detector). Slow; for small cases only. Returns mm⁻¹.
 """
@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from xrayraster.fdk_geometry import cosine_weights, fdk_views
-from xrayraster.ramp_filter import ramp_response
+from xrayraster.recon.fdk_weights import cosine_weights, fdk_views
+from xrayraster.recon.ramp_filter import ramp_response
 
 
 def filtered_projections(projections, geometry, volume, window="ram-lak", cutoff=1.0, scan="auto"):

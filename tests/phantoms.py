@@ -1,6 +1,6 @@
 """Analytic ellipsoid phantoms: an independent float64 NumPy reference for reconstruction tests.
 
-Nothing here uses xrayraster's renderer or reconstruction; only :mod:`xrayraster.geometry` is
+Nothing here uses xrayraster's renderer or reconstruction; only :mod:`xrayraster.core.geometry` is
 read, for its documented conventions (mm, radians, rotation axis z, pixel centres, (z, y, x)
 volumes). Line integrals come from exact chord lengths, ground-truth volumes from point tests,
 so a reconstruction compared with these is compared with the mathematics, not with itself.
@@ -14,7 +14,7 @@ from typing import Iterable
 
 import numpy as np
 
-from xrayraster.geometry import VolumeGeometry, as_vector_geometry, detector_pixel_centres
+from xrayraster.core.geometry import VolumeGeometry, as_vector_geometry, detector_pixel_centres
 
 __all__ = [
     "Ellipsoid",

@@ -18,8 +18,8 @@ from PIL import Image
 
 import xrayraster as xr
 from xrayraster import cli
-from xrayraster.config import load_scene_file
-from xrayraster.io import read_tiff_info
+from xrayraster.io.scene_file import load_scene_file
+from xrayraster.io.tiff import read_tiff_info
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLE = ROOT / "examples" / "bracket_and_ball.toml"

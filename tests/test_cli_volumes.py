@@ -13,8 +13,8 @@ import tifffile
 
 import xrayraster as xr
 from xrayraster import cli
-from xrayraster.geometry_io import geometry_from_repr, read_scan_file
-from xrayraster.io import read_tiff_info, write_tiff
+from xrayraster.io.scan_file import geometry_from_repr, read_scan_file
+from xrayraster.io.tiff import read_tiff_info, write_tiff
 
 from phantoms import project, sphere
 
@@ -104,7 +104,7 @@ def test_voxelize_writes_labels_fiji_reads(gl, tmp_path, capsys):
     voxel size in mm, a label table in the metadata, and exit 2 without a volume."""
     from pathlib import Path
 
-    from xrayraster.config import load_scene_file
+    from xrayraster.io.scene_file import load_scene_file
 
     example = Path(__file__).resolve().parent.parent / "examples" / "bracket_and_ball.toml"
     volume = {"shape": [32, 48, 40], "voxel_size": [0.3, 0.25, 0.3], "offset": [0.0, 0.5, -0.2]}

@@ -16,9 +16,10 @@ import numpy as np
 import pytest
 
 from xrayraster import Detector, Material, Spectrum, cli
-from xrayraster.config import ConfigError, load_scene_file
-from xrayraster.geometry import ConeBeamGeometry, ParallelBeamGeometry
-from xrayraster.io import NEW_FILE_MODE, atomic_write, write_quicklook
+from xrayraster.io.scene_file import ConfigError, load_scene_file
+from xrayraster.core.geometry import ConeBeamGeometry, ParallelBeamGeometry
+from xrayraster.core.files import NEW_FILE_MODE, atomic_write
+from xrayraster.io.tiff import write_quicklook
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -355,7 +356,7 @@ def test_output_mode_follows_the_umask_and_leaves_it_unchanged(umask, mode, tmp_
     code = (
         "import os, stat, sys\n"
         f"os.umask({umask:#o})\n"
-        "from xrayraster.io import atomic_write\n"
+        "from xrayraster.core.files import atomic_write\n"
         "out = atomic_write(sys.argv[1], lambda tmp: open(tmp, 'wb').write(b'x'))\n"
         "print(oct(stat.S_IMODE(os.stat(out).st_mode)), oct(os.umask(0)))\n"
     )

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from xrayraster.detector import Detector
-from xrayraster.physics import PhysicsError
+from xrayraster.physics.detector import Detector
+from xrayraster.physics.beer_lambert import PhysicsError
 
 
 class Slab:

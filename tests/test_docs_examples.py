@@ -81,7 +81,7 @@ def test_python_block_runs(doc, line, code, expect, workdir, request):
 
 @pytest.mark.parametrize("doc, line, text, expect", _params(JSON))
 def test_json_scan_file_loads(doc, line, text, expect, tmp_path):
-    from xrayraster.geometry_io import read_scan_file
+    from xrayraster.io.scan_file import read_scan_file
 
     path = tmp_path / "scan.json"
     path.write_text(text)
@@ -99,7 +99,7 @@ def _write_scene(tmp_path: Path, text: str) -> Path:
 
 @pytest.mark.parametrize("doc, line, text, expect", _params(TOML))
 def test_toml_block_loads(doc, line, text, expect, tmp_path):
-    from xrayraster.config import load_scene_file
+    from xrayraster.io.scene_file import load_scene_file
 
     path = _write_scene(tmp_path, text)
     if expect is not None:
@@ -114,7 +114,7 @@ def test_toml_block_loads(doc, line, text, expect, tmp_path):
 def test_toml_scene_renders_every_material(doc, line, text, expect, tmp_path, gl):
     """A documented scene that loads but shows nothing (object behind the source, off the detector) is broken too."""
     from xrayraster import Renderer
-    from xrayraster.config import load_scene_file
+    from xrayraster.io.scene_file import load_scene_file
 
     loaded = load_scene_file(_write_scene(tmp_path, text))
     with Renderer(loaded.geometry, context=gl) as renderer:

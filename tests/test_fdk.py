@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 import xrayraster as xr
-from xrayraster import reconstruction
-from xrayraster.reconstruction import ReconstructionError, fdk
-from xrayraster.geometry import GeometryError
-from xrayraster.ramp_filter import FILTERS
+from xrayraster.recon import fdk as reconstruction
+from xrayraster.recon.fdk import ReconstructionError, fdk
+from xrayraster.core.geometry import GeometryError
+from xrayraster.core.choices import FILTERS
 
 from fdk_reference import fdk_reference
 from phantoms import project, shepp_logan_3d, sphere, voxel_values
@@ -210,7 +210,7 @@ def test_redundancy_weights_of_a_line_and_its_conjugate_sum_to_one():
     two weights add to 1; the conjugate ray is found by geometry (the source position at the
     other end of the line's chord of the source circle, and the column through the first
     source), its weight interpolated between views and columns."""
-    from xrayraster.fdk_geometry import fdk_views
+    from xrayraster.recon.fdk_weights import fdk_views
 
     for g in (xr.ConeBeamGeometry(100, 200, (4, 64), 0.8, np.linspace(0, math.pi + 2 * FAN + 0.3, 721)),
               xr.ConeBeamGeometry(100, 200, (4, 40), 0.8, xr.full_circle(720), detector_offset=(0, 9.0))):
@@ -277,8 +277,8 @@ def test_bad_input_is_refused_with_the_fix(cl):
 
 
 def test_host_memory_is_checked_before_any_work():
-    from xrayraster.reconstruction import plan_memory
-    from xrayraster.fdk_geometry import fdk_views
+    from xrayraster.recon.fdk import plan_memory
+    from xrayraster.recon.fdk_weights import fdk_views
 
     views = fdk_views(CASES["full"], SMALL_VOLUME)
     huge = xr.VolumeGeometry((4096, 4096, 4096), 0.1)

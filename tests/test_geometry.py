@@ -1,4 +1,4 @@
-"""xrayraster.geometry: frame conventions, value semantics, indexing and validation.
+"""xrayraster.core.geometry: frame conventions, value semantics, indexing and validation.
 
 Expected positions are written out by hand from the conventions in the module docstring
 (source at R_z(θ)·(0, −SOD, 0), detector centre at R_z(θ)·(0, SDD − SOD, 0), u = R_z(θ)·(pu, 0, 0),
@@ -12,9 +12,9 @@ import math
 import numpy as np
 import pytest
 
-import xrayraster.geometry as geometry
+import xrayraster.core.geometry as geometry
 from reference import cone_rays, parallel_rays
-from xrayraster.geometry import (
+from xrayraster.core.geometry import (
     ConeBeamGeometry,
     GeometryError,
     ParallelBeamGeometry,

@@ -11,7 +11,7 @@ import trimesh
 from reference import box_chord, cone_rays
 
 import xrayraster as xr
-from xrayraster import glcontext
+from xrayraster.gl import context as glcontext
 
 
 def cube_error(context) -> float:

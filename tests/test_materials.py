@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import xraylib
 
-from xrayraster.materials import ENERGY_MAX_KEV, ENERGY_MIN_KEV, Material, MaterialError
+from xrayraster.scene.materials import ENERGY_MAX_KEV, ENERGY_MIN_KEV, Material, MaterialError
 
 ENERGIES = np.array([10, 15, 20, 30, 40, 50, 60, 80, 100, 150], dtype=float)  # keV
 

@@ -1,4 +1,4 @@
-"""Mesh loading/checking (xrayraster.mesh), transforms (xrayraster.transform) and scenes (xrayraster.scene).
+"""Mesh loading/checking (xrayraster.scene.mesh), transforms (xrayraster.core.transform) and scenes (xrayraster.scene.scene).
 
 Inputs come from trimesh.creation; expected volumes, bounds and transformed points are hand values
 (a 2×3×4 box has volume 24 mm³), and outward orientation is checked per triangle against the
@@ -16,7 +16,7 @@ import pytest
 import trimesh
 
 from xrayraster import Mesh, MeshError, Scene, SceneError, Transform, load_mesh
-import xrayraster.transform as transform_module
+import xrayraster.core.transform as transform_module
 
 BOX_EXTENTS = (2.0, 3.0, 4.0)
 BOX_VOLUME = 24.0

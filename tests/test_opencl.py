@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from xrayraster import opencl
-from xrayraster.opencl import CLContext, DeviceInfo, OpenCLError
+from xrayraster.recon import opencl
+from xrayraster.recon.opencl import CLContext, DeviceInfo, OpenCLError
 
 
 def _info(index, kind, units, clock=1000, platform="P", name="D"):

@@ -20,7 +20,7 @@ from phantoms import (
     sphere,
     voxel_values,
 )
-from xrayraster.geometry import (
+from xrayraster.core.geometry import (
     ConeBeamGeometry,
     ParallelBeamGeometry,
     VectorGeometry,

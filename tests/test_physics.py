@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import xrayraster as xr
-from xrayraster import physics
+from xrayraster.physics import beer_lambert as physics
 
 ENERGIES = np.arange(15.0, 80.0, 1.0)  # keV
 PHOTONS = np.exp(-0.5 * ((ENERGIES - 40.0) / 12.0) ** 2) * 1e3  # photons per mm² at 1 m per bin

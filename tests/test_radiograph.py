@@ -9,8 +9,8 @@ import trimesh
 from reference import box_chord, cone_rays
 
 import xrayraster as xr
-from xrayraster import physics
-from xrayraster.radiograph import radiograph
+from xrayraster.physics import beer_lambert as physics
+from xrayraster.physics.radiograph import radiograph
 
 AL = xr.Material.element("Al")
 CSI = xr.Material.from_formula("CsI", 4.51)

@@ -1,4 +1,4 @@
-"""xrayraster.raysetup.view_rays: the float64 per-view ray coefficients the shaders evaluate.
+"""xrayraster.gl.rays.view_rays: the float64 per-view ray coefficients the shaders evaluate.
 
 Every check is made against the geometry's definition, computed here: the centre of the pixel at
 centred offsets (c', r') is P = d + c'·u + r'·v, a cone-beam ray runs from the source s through P,
@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from reference import cone_rays, random_rotation
-from xrayraster.geometry import ConeBeamGeometry, ParallelBeamGeometry, VectorGeometry
-from xrayraster.raysetup import view_rays
+from xrayraster.core.geometry import ConeBeamGeometry, ParallelBeamGeometry, VectorGeometry
+from xrayraster.gl.rays import view_rays
 
 
 def _unit(x):

@@ -15,7 +15,7 @@ import pytest
 spekpy = pytest.importorskip("spekpy")
 
 from xrayraster import Spectrum, SpectrumError
-from xrayraster.spectrum import REFERENCE_DISTANCE_MM
+from xrayraster.physics.spectrum import REFERENCE_DISTANCE_MM
 
 # Two tube set-ups, each made once per module (a SpekPy spectrum costs ~0.2–0.6 s).
 TUBES = {

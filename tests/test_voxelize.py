@@ -11,7 +11,7 @@ import pytest
 import trimesh
 
 import xrayraster as xr
-from xrayraster.label_volume import VoxelizeError, voxelize
+from xrayraster.gl.voxelize import VoxelizeError, voxelize
 
 VOLUME = xr.VolumeGeometry((48, 56, 64), (0.25, 0.22, 0.2), offset=(0.1, -0.2, 0.15))
 POINTS = 100_000
@@ -257,7 +257,7 @@ def test_fractions_are_partial_volumes(gl):
 
 
 def test_tiles_give_the_same_labels(gl, monkeypatch):
-    from xrayraster import label_volume as module
+    from xrayraster.gl import voxelize as module
 
     scene, _ = _scene(CASES["moved sample"])
     whole = voxelize(scene, VOLUME, context=gl).data

@@ -1,25 +1,49 @@
-"""xrayraster: X-ray CT simulation from triangle meshes (see README.md and DESIGN.md)."""
+"""xrayraster: X-ray CT simulation from triangle meshes (see README.md; the layers are in docs/architecture.md).
 
-from .detector import Detector
-from .reconstruction import ReconstructionError, Volume, fdk
-from .geometry import ConeBeamGeometry, GeometryError, ParallelBeamGeometry, VectorGeometry, VolumeGeometry, full_circle
-from .glcontext import GLContext, GLContextError
-from .materials import Material, MaterialError
-from .mesh import Mesh, MeshError, load_mesh
-from .opencl import CLContext, OpenCLError
-from .physics import PhysicsError
-from .radiograph import Radiograph
-from .render import RenderError, Renderer
-from .scene import Scene, SceneError, SceneObject
-from .spectrum import Spectrum, SpectrumError
-from .transform import Transform
-from .label_volume import LabelVolume, VoxelizeError, voxelize
+The public API is what this module exports; the stage subpackages below it may reorganise.
+"""
+
+from .core.errors import (
+    ConfigError,
+    GeometryError,
+    GLContextError,
+    MaterialError,
+    MeshError,
+    OpenCLError,
+    PhysicsError,
+    ReconstructionError,
+    RenderError,
+    SceneError,
+    SpectrumError,
+    VoxelizeError,
+    XrayrasterError,
+)
+from .core.geometry import (
+    ConeBeamGeometry,
+    ParallelBeamGeometry,
+    VectorGeometry,
+    VolumeGeometry,
+    full_circle,
+)
+from .core.transform import Transform
+from .gl.context import GLContext
+from .gl.voxelize import LabelVolume, voxelize
+from .physics.detector import Detector
+from .physics.radiograph import Radiograph
+from .physics.spectrum import Spectrum
+from .recon.fdk import Volume, fdk
+from .recon.opencl import CLContext
+from .scene.materials import Material
+from .scene.mesh import Mesh, load_mesh
+from .scene.scene import Scene, SceneObject
+from .simulate.renderer import Renderer
 
 __version__ = "0.1.0"
 
 __all__ = [
     "CLContext",
     "ConeBeamGeometry",
+    "ConfigError",
     "Detector",
     "GLContext",
     "GLContextError",
@@ -46,6 +70,7 @@ __all__ = [
     "Volume",
     "VoxelizeError",
     "VolumeGeometry",
+    "XrayrasterError",
     "fdk",
     "full_circle",
     "load_mesh",

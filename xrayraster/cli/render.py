@@ -1,0 +1,161 @@
+"""``xrayraster render SCENE.toml -o OUT.tif``: radiographs (or ``--path-lengths``) of a scene file's views."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..core.choices import OVERLAP_MODES, RADIOGRAPH_OUTPUTS
+from ..core.errors import ConfigError
+from ..io.scene_file import load_scene_file
+from ..io.tiff import write_quicklook, write_tiff
+from ..physics.detector import Detector
+from ..scene.materials import Material
+from ..simulate.renderer import Renderer
+from .views import parse_views
+
+
+def add_parser(subparsers) -> None:
+    render = subparsers.add_parser("render", help="render one or more views of a TOML scene")
+    render.add_argument("scene", type=Path, help="scene file (docs/scene-format.md)")
+    render.add_argument("-o", "--out", dest="out", metavar="OUT.tif", type=Path, required=True,
+                        help="float32 TIFF to write (a PNG quick-look goes beside it)")
+    render.add_argument("--output", choices=RADIOGRAPH_OUTPUTS, default=None,
+                        help="radiograph quantity: raw detector signal, transmission, or lineint = -ln(transmission) (default lineint)")
+    render.add_argument("--noise", action="store_true", help="add quantum (Poisson) and electronic noise")
+    render.add_argument("--seed", type=int, default=None, help="noise seed (default 0; needs --noise)")
+    render.add_argument("--path-lengths", action="store_true",
+                        help="write per-material path lengths in mm instead of radiographs")
+    render.add_argument("--views", default="0", help="comma-separated view indices, or 'all' (default: 0)")
+    render.add_argument("--supersampling", type=int, default=1, help="k×k rays per pixel (default 1)")
+    render.add_argument("--overlap", choices=OVERLAP_MODES, default="auto", help="overlap handling (default auto)")
+    render.add_argument("-v", "--verbose", action="store_true")
+    render.set_defaults(run=run)
+
+
+def run(args) -> int:
+    if args.path_lengths:
+        ignored = [flag for flag, given in (("--output", args.output is not None), ("--noise", args.noise),
+                                             ("--seed", args.seed is not None)) if given]
+        if ignored:
+            raise ConfigError(f"{', '.join(ignored)} appl(y/ies) to radiographs, not to --path-lengths; drop one or the other")
+        return _render_path_lengths(args)
+    if args.seed is not None and not args.noise:
+        raise ConfigError("--seed needs --noise (without noise the radiograph is the expected value)")
+    return _render_radiographs(args)
+
+
+def _material_name(material) -> str:
+    return material.name if isinstance(material, Material) else str(material)
+
+
+def _render_path_lengths(args) -> int:
+    loaded = load_scene_file(args.scene)
+    geometry, scene = loaded.geometry, loaded.scene
+    views = parse_views(args.views, geometry.num_views)
+    start = time.perf_counter()
+    with Renderer(geometry, supersampling=args.supersampling, overlap=args.overlap) as renderer:
+        stack = np.stack([renderer.path_lengths(scene, v) for v in views])
+        method, driver = renderer.last_method, renderer.gl.renderer
+    seconds = time.perf_counter() - start
+    info = {
+        "quantity": "path length",
+        "units": "mm",
+        "axes": "view, material, row, col",
+        "materials": [_material_name(m) for m in scene.materials],
+        "views": views,
+        "geometry": repr(geometry[views]),
+        "supersampling": args.supersampling,
+        "method": method,
+        "renderer": driver,
+        "scene_file": str(args.scene),
+    }
+    out = write_tiff(args.out, stack, axes="TCYX", pixel_size_mm=geometry.pixel_size, info=info)
+    png = write_quicklook(args.out.with_suffix(".png"), stack[0].sum(axis=0))
+    print(
+        f"{out}: {len(views)} view(s) × {len(scene.materials)} material(s) × {stack.shape[2]}×{stack.shape[3]} "
+        f"px, max {stack.max():.4f} mm, {method} pass, {seconds:.2f} s on {driver}; quick-look {png}"
+    )
+    return 0
+
+
+QUANTITIES = {
+    "raw": "raw detector signal (flat-field-free: open beam, dark offset and noise included)",
+    "transmission": "transmission (raw - dark) / (flat - dark)",
+    "lineint": "line integral -ln(transmission)",
+}
+
+
+def radiograph_units(output: str, counting: bool) -> str:
+    """Units of a radiograph TIFF: raw signal in keV deposited (integrating) or counts; normalised ones are ratios."""
+    if output == "raw":
+        return "counts" if counting else "keV deposited"
+    return "1"  # transmission and its -ln are dimensionless
+
+
+def _render_radiographs(args) -> int:
+    loaded = load_scene_file(args.scene)
+    missing = [what for what, absent in (
+        ("a [source] table (the X-ray spectrum)", loaded.spectrum is None),
+        ("a [materials] table (composition and density of every object's material)", loaded.materials is None),
+    ) if absent]
+    if missing:
+        raise ConfigError(
+            f"{args.scene}: radiographs need {' and '.join(missing)}; add {'them' if len(missing) > 1 else 'it'} "
+            "(docs/scene-format.md), or pass --path-lengths to write path lengths only"
+        )
+    geometry, scene, spectrum = loaded.geometry, loaded.scene, loaded.spectrum
+    detector = loaded.detector if loaded.detector is not None else Detector()
+    output = args.output or "lineint"
+    seed = (0 if args.seed is None else args.seed) if args.noise else None
+    views = parse_views(args.views, geometry.num_views)
+    start = time.perf_counter()
+    with Renderer(geometry, supersampling=args.supersampling, overlap=args.overlap) as renderer:
+        shots = [renderer.project(scene, spectrum, v, detector=detector, output=output, noise=args.noise, seed=seed)
+                 for v in views]
+        method, driver = renderer.last_method, renderer.gl.renderer
+    seconds = time.perf_counter() - start
+    stack = np.stack([shot.image for shot in shots])
+    starved = [shot.starved for shot in shots]
+    units = radiograph_units(output, detector.counting)
+    info = {
+        "quantity": QUANTITIES[output],
+        "output": output,
+        "units": units,
+        "axes": "view, row, col",
+        "materials": [_material_name(m) for m in scene.materials],
+        "material_compositions": [repr(m) for m in scene.materials],
+        "views": views,
+        "geometry": repr(geometry[views]),
+        "spectrum": spectrum.description,
+        "spectrum_photons_per_mm2_at_1m": spectrum.total,
+        "spectrum_bins": spectrum.n_bins,
+        "detector": repr(detector),
+        "bins_used": [shot.bins for shot in shots],
+        "dropped_signal_share": [shot.dropped for shot in shots],
+        "starved_pixels": starved,
+        "noise": bool(args.noise),
+        "seed": seed,
+        "supersampling": args.supersampling,
+        "method": method,
+        "renderer": driver,
+        "scene_file": str(args.scene),
+    }
+    out = write_tiff(args.out, stack, axes="TYX", pixel_size_mm=geometry.pixel_size, info=info)
+    png = write_quicklook(args.out.with_suffix(".png"), stack[0])
+    extras = []
+    if args.noise:
+        extras.append(f"noise seed {seed}")
+    if any(starved):
+        extras.append(f"{sum(starved)} starved pixel(s) clamped ({', '.join(map(str, starved))} per view)")
+    print(
+        f"{out}: {len(views)} view(s) × {stack.shape[1]}×{stack.shape[2]} px {output} radiograph"
+        f" [{units}], range {stack.min():.4g} to {stack.max():.4g}, {shots[0].bins} energy bins"
+        + "".join(f", {e}" for e in extras)
+        + f", {method} pass, {seconds:.2f} s on {driver}; quick-look {png}"
+    )
+    return 0
+
+

@@ -1,0 +1,24 @@
+"""Every string option of the API and the command line, in one place.
+
+argparse's ``choices``, the checks of every function that takes one of these, and the docs read
+these tuples, so a new option is added once. :func:`check_choice` makes the error message.
+"""
+
+from __future__ import annotations
+
+BEAMS = ("cone", "parallel")
+OVERLAP_MODES = ("auto", "sum", "nested", "resolve")  # path lengths where objects overlap
+RADIOGRAPH_OUTPUTS = ("raw", "transmission", "lineint")  # what a radiograph holds
+DETECTOR_MODES = ("integrating", "counting")
+RECONSTRUCTION_INPUTS = ("lineint", "transmission")  # what a projection stack handed to FDK holds
+FILTERS = ("ram-lak", "shepp-logan", "cosine", "hamming", "hann")  # ramp-filter windows
+SCAN_KINDS = ("auto", "full", "short")  # FDK redundancy weighting
+VOXELIZE_METHODS = ("exact", "stencil")
+
+
+def check_choice(value, choices: tuple[str, ...], field: str, error: type[Exception]) -> str:
+    """``value`` if it is one of ``choices``, else ``error`` naming ``field`` and the choices."""
+    if not isinstance(value, str) or value not in choices:
+        listed = ", ".join(repr(c) for c in choices)
+        raise error(f"{field} must be one of {listed}, got {value!r}")
+    return value

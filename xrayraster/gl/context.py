@@ -1,0 +1,189 @@
+"""The headless OpenGL context: one object owns all GL state, reused across renders.
+
+Backends, tried in order unless ``XRAYRASTER_GL`` (or the ``backend`` argument) names one:
+
+* ``egl``: moderngl's standalone EGL context (Mesa llvmpipe on a CPU server; the NVIDIA or AMD
+  driver on a GPU server).
+* ``osmesa``: Mesa's off-screen software renderer through ``libOSMesa``, for machines without
+  EGL. It renders into a 1×1 dummy buffer; all our output goes to framebuffer objects.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import os
+import re
+from contextlib import contextmanager
+
+import moderngl
+
+from ..core.errors import GLContextError
+from ..core.shader_files import read_shader
+
+REQUIRED_GL = 430  # SSBOs, compute shaders, indirect draws
+
+INSTALL_HINT = (
+    "xrayraster needs OpenGL 4.3 through EGL or OSMesa. On Debian/Ubuntu install the drivers with "
+    "'apt-get install libegl1 libgl1-mesa-dri' (EGL, preferred) or 'apt-get install libosmesa6' "
+    "(OSMesa); on a GPU server, the vendor driver's EGL library."
+)
+
+
+class GLContext:
+    """A headless OpenGL 4.3+ context plus the compiled programs of ``shaders/``.
+
+    Use as a context manager or call :meth:`release`. Programs are compiled once per context.
+    """
+
+    def __init__(self, backend: str | None = None):
+        backend = backend or os.environ.get("XRAYRASTER_GL") or None
+        if backend not in (None, "egl", "osmesa"):
+            raise GLContextError(f"unknown GL backend {backend!r}: use 'egl' or 'osmesa' (XRAYRASTER_GL)")
+        errors = []
+        self._depth = 0  # nesting of current()
+        self._osmesa = None
+        self.ctx = None
+        for name in (backend,) if backend else ("egl", "osmesa"):
+            try:
+                self.ctx = _create(name, self)
+                self.backend = name
+                break
+            except Exception as exc:  # each backend fails in its own way
+                errors.append(f"{name}: {exc}")
+        if self.ctx is None:
+            raise GLContextError("no OpenGL context could be created (" + "; ".join(errors) + "). " + INSTALL_HINT)
+        if self.ctx.version_code < REQUIRED_GL:
+            version = self.ctx.info["GL_VERSION"]
+            self.release()
+            raise GLContextError(f"OpenGL {version} found, 4.3 needed. " + INSTALL_HINT)
+        self.ctx.info  # queried (and cached by moderngl) now, while this context is current
+        self._programs: dict[tuple, moderngl.Program | moderngl.ComputeShader] = {}
+
+    @contextmanager
+    def current(self):
+        """``with gl.current():`` makes this context current in the calling thread, and the
+        previous one again on exit. GL calls go to whichever context is current, so every
+        public entry point that touches GL state enters this: several contexts (ours, a
+        second renderer's, a peer library's) can then live in one process. Re-entrant: only
+        the outermost level switches (moderngl's own enter/exit do not nest)."""
+        if self._depth == 0:
+            self.ctx.__enter__()
+        self._depth += 1
+        try:
+            yield self
+        finally:
+            self._depth -= 1
+            if self._depth == 0:
+                self.ctx.__exit__(None, None, None)
+
+    @property
+    def renderer(self) -> str:
+        """Driver name, e.g. 'llvmpipe (LLVM 15.0.6, 256 bits)'."""
+        with self.current():
+            return self.ctx.info["GL_RENDERER"]
+
+    def program(self, vertex: str, fragment: str, defines: dict | None = None) -> moderngl.Program:
+        key = (vertex, fragment, tuple(sorted((defines or {}).items())))
+        if key not in self._programs:
+            with self.current():
+                self._programs[key] = self.ctx.program(
+                    vertex_shader=shader_source(vertex, defines), fragment_shader=shader_source(fragment, defines)
+                )
+        return self._programs[key]
+
+    def function(self, name: str, restype, argtypes):
+        """A raw GL entry point as a ctypes function, for what moderngl does not wrap (stencil
+        operations), or None when the driver lacks it. Call it inside :meth:`current`."""
+        if self.backend == "osmesa":
+            pointer = self._osmesa.load_opengl_function(name)
+        else:
+            egl = ctypes.CDLL(ctypes.util.find_library("EGL") or "libEGL.so.1")
+            egl.eglGetProcAddress.restype = ctypes.c_void_p
+            egl.eglGetProcAddress.argtypes = [ctypes.c_char_p]
+            pointer = egl.eglGetProcAddress(name.encode())
+        return ctypes.CFUNCTYPE(restype, *argtypes)(pointer) if pointer else None
+
+    def compute(self, name: str, defines: dict | None = None) -> moderngl.ComputeShader:
+        key = (name, tuple(sorted((defines or {}).items())))
+        if key not in self._programs:
+            with self.current():
+                self._programs[key] = self.ctx.compute_shader(shader_source(name, defines))
+        return self._programs[key]
+
+    def release(self) -> None:
+        if self.ctx is not None:
+            with self.current():
+                for p in getattr(self, "_programs", {}).values():
+                    p.release()
+                self._programs = {}
+            self.ctx.release()
+            self.ctx = None
+        if self._osmesa is not None:
+            self._osmesa.release()
+            self._osmesa = None
+
+    def __enter__(self) -> "GLContext":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+
+def _create(name: str, owner: GLContext) -> moderngl.Context:
+    if name == "egl":
+        return moderngl.create_context(standalone=True, backend="egl", require=REQUIRED_GL)
+    owner._osmesa = _OSMesaLoader()
+    return moderngl.create_context(context=owner._osmesa, require=REQUIRED_GL)
+
+
+class _OSMesaLoader:
+    """Makes an OSMesa core-profile context current and resolves GL functions for moderngl."""
+
+    def __init__(self):
+        path = ctypes.util.find_library("OSMesa")
+        if path is None:
+            raise OSError("libOSMesa not found")
+        lib = ctypes.CDLL(path)
+        lib.OSMesaCreateContextAttribs.restype = ctypes.c_void_p
+        lib.OSMesaCreateContextAttribs.argtypes = [ctypes.POINTER(ctypes.c_int), ctypes.c_void_p]
+        lib.OSMesaMakeCurrent.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_uint, ctypes.c_int, ctypes.c_int]
+        lib.OSMesaGetProcAddress.restype = ctypes.c_void_p
+        lib.OSMesaGetProcAddress.argtypes = [ctypes.c_char_p]
+        lib.OSMesaDestroyContext.argtypes = [ctypes.c_void_p]
+        # OSMESA_FORMAT, OSMESA_RGBA, OSMESA_PROFILE, OSMESA_CORE_PROFILE, major, minor
+        attrs = (ctypes.c_int * 11)(0x22, 0x1908, 0x33, 0x34, 0x36, 4, 0x37, 5, 0, 0, 0)
+        self._ctx = lib.OSMesaCreateContextAttribs(attrs, None)
+        if not self._ctx:
+            raise OSError("OSMesaCreateContextAttribs failed (OpenGL 4.5 core profile)")
+        self._buffer = (ctypes.c_ubyte * 4)()
+        if not lib.OSMesaMakeCurrent(self._ctx, self._buffer, 0x1401, 1, 1):  # GL_UNSIGNED_BYTE
+            raise OSError("OSMesaMakeCurrent failed")
+        self._lib = lib
+
+    def load_opengl_function(self, name: str) -> int:
+        return self._lib.OSMesaGetProcAddress(name.encode()) or 0
+
+    def __enter__(self):  # moderngl's Context.__enter__ calls this: make our context current
+        self._lib.OSMesaMakeCurrent(self._ctx, self._buffer, 0x1401, 1, 1)
+
+    def __exit__(self, *exc):  # OSMesa cannot restore another API's context; leave ours current
+        pass
+
+    def release(self) -> None:
+        if self._ctx:
+            self._lib.OSMesaDestroyContext(self._ctx)
+            self._ctx = None
+
+
+_INCLUDE = re.compile(r'^#include "([^"]+)"\s*$', re.MULTILINE)
+
+
+def shader_source(name: str, defines: dict | None = None) -> str:
+    """GLSL text of ``shaders/<name>`` with ``#include "x"`` expanded and ``defines`` inserted."""
+    text = read_shader(name)
+    text = _INCLUDE.sub(lambda m: read_shader(m.group(1)), text)
+    if defines:
+        head, _, body = text.partition("\n")  # '#version' must stay the first line
+        text = head + "\n" + "".join(f"#define {k} {v}\n" for k, v in defines.items()) + body
+    return text

@@ -1,0 +1,63 @@
+"""TIFF stacks with JSON metadata (Fiji-readable), and quick-look PNGs; both written atomically."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..core.files import atomic_write
+
+
+def write_tiff(path, data: np.ndarray, *, axes: str, pixel_size_mm: tuple[float, float], info: dict,
+               spacing_mm: float | None = None) -> Path:
+    """ImageJ hyperstack (Fiji reads axes and mm scale: ``pixel_size_mm`` (y, x) and, for
+    volumes, the slice ``spacing_mm``); ``info`` goes in as JSON. uint8 and uint16 (labels) are
+    written as they are, anything else as float32."""
+    import tifffile
+
+    keep = data.dtype in (np.uint8, np.uint16)
+    data = np.ascontiguousarray(data, dtype=data.dtype if keep else np.float32)
+    metadata = {"axes": axes, "unit": "mm", "Info": json.dumps(info, indent=1)}
+    if spacing_mm is not None:
+        metadata["spacing"] = float(spacing_mm)
+    resolution = (1.0 / pixel_size_mm[1], 1.0 / pixel_size_mm[0])
+    return atomic_write(
+        path, lambda tmp: tifffile.imwrite(tmp, data, imagej=True, metadata=metadata, resolution=resolution)
+    )
+
+
+def read_tiff(path) -> tuple[np.ndarray, dict]:
+    """The array of a TIFF and the JSON ``info`` of :func:`write_tiff` ({} for a TIFF from elsewhere)."""
+    import tifffile
+
+    with tifffile.TiffFile(path) as tif:
+        data = tif.asarray()
+        text = (tif.imagej_metadata or {}).get("Info")
+    try:
+        return data, json.loads(text) if text else {}
+    except json.JSONDecodeError:
+        return data, {}
+
+
+def read_tiff_info(path) -> dict:
+    """The JSON ``info`` written by :func:`write_tiff`."""
+    import tifffile
+
+    with tifffile.TiffFile(path) as tif:
+        return json.loads(tif.imagej_metadata["Info"])
+
+
+def write_quicklook(path, image: np.ndarray) -> Path:
+    """8-bit PNG scaled from 0 to the image maximum (a quick look, not data).
+
+    Shown as a person expects: +z up. Array row 0 is the lowest detector row (docs/geometry.md),
+    so the rows are flipped for the picture; the TIFF keeps the array order.
+    """
+    from PIL import Image
+
+    peak = float(image.max())
+    scaled = np.zeros(image.shape, np.uint8) if peak <= 0 else np.round(255 * np.clip(image / peak, 0, 1)).astype(np.uint8)
+    scaled = np.ascontiguousarray(scaled[::-1])
+    return atomic_write(path, lambda tmp: Image.fromarray(scaled).save(tmp, format="PNG"))

@@ -1,0 +1,1 @@
+"""From path lengths to detector signals: spectra, detector, spectral Beer-Lambert, noise, radiographs."""

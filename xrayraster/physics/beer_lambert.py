@@ -1,0 +1,203 @@
+"""From path lengths to what a detector records: spectral Beer–Lambert, quantum noise, flat/dark
+normalisation (all on the CPU, vectorised).
+
+For a pixel p with path lengths L_c(p) (mm) through the material channels c, the expected number
+of photons of energy bin b reaching it is
+
+    n_b(p) = N_b · a(p) · exp(−Σ_c μ_cb · L_c(p))
+
+with N_b the spectrum's photons per mm² at 1 m, a(p) the pixel's photon factor
+(:func:`pixel_photon_factor`: inverse square and obliquity), μ_cb the linear attenuation (mm⁻¹).
+A detector turns the photons into a signal with per-photon weights w_b (:class:`Detector`):
+w_b = E_b·η_b (energy-integrating, keV deposited) or η_b (photon counting), η the absorption
+efficiency. Quantum noise: the detected photons of each bin are Poisson(η_b·n_b) and independent,
+so a counting detector's total is one Poisson draw per pixel, an integrating detector's is the
+weighted sum of one draw per bin (a moment-exact Gaussian where a pixel expects ≥ 1000 photons).
+
+Work the request does not need is skipped: one energy bin needs no spectral sum, no noise needs
+no sampling.
+"""
+
+from __future__ import annotations
+
+import os
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.errors import PhysicsError
+from ..core.geometry import as_vector_geometry
+from .spectrum import REFERENCE_DISTANCE_MM
+
+
+def pixel_photon_factor(geometry, view: int) -> np.ndarray:
+    """Per pixel, mm² of fluence-at-1-m it collects: area · cos(incidence) · (1 m / distance)².
+
+    Cone beam: distance and incidence from the source to each pixel centre. Parallel beam: the
+    fluence is taken as is at the detector (area · cos(incidence) only).
+    """
+    vec = as_vector_geometry(geometry)
+    rows, cols = vec.detector_shape
+    s, d, u, v = np.split(vec.array[view], 4)
+    normal = np.cross(u, v)
+    area = np.linalg.norm(normal)
+    normal /= area
+    if vec.beam == "cone":
+        # ray = (d − s) + c·u + r·v; |ray|² expanded so only (rows, 1) + (1, cols) terms are
+        # formed, and n·ray = n·(d − s) for every pixel (u, v lie in the plane).
+        r = (np.arange(rows) - (rows - 1) / 2)[:, None]
+        c = (np.arange(cols) - (cols - 1) / 2)[None, :]
+        h = d - s
+        along_r = r * r * (v @ v) + 2 * r * (v @ h) + h @ h
+        along_c = c * c * (u @ u) + 2 * c * (u @ h)
+        distance2 = along_r + along_c + 2 * (u @ v) * r * c
+        return (area * abs(float(normal @ h)) * REFERENCE_DISTANCE_MM**2) * distance2**-1.5
+    cos = abs(float(s @ normal)) / np.linalg.norm(s)
+    return np.full((rows, cols), area * cos)
+
+
+def transmitted_photons(lengths: np.ndarray, mu: np.ndarray, photons: np.ndarray, factor) -> np.ndarray:
+    """Expected photons per bin and pixel, ``(bins, rows, cols)`` float64 (see module docstring).
+
+    ``lengths`` (channels, rows, cols) mm; ``mu`` (channels, bins) mm⁻¹; ``photons`` (bins,) per
+    mm² at 1 m; ``factor`` (rows, cols) or scalar from :func:`pixel_photon_factor`.
+    """
+    lengths, mu, photons = _check(lengths, mu, photons)
+    exponent = np.tensordot(mu.T, lengths, axes=1)  # (bins, rows, cols)
+    np.negative(exponent, out=exponent)
+    np.exp(exponent, out=exponent)
+    exponent *= photons[:, None, None]
+    exponent *= factor
+    return exponent
+
+
+def expected_signal(lengths, mu, photons, weights, factor) -> np.ndarray:
+    """Noise-free detector signal ``(rows, cols)`` float64: Σ_b w_b · n_b(p).
+
+    Chunked over rows so the (bins × pixels) intermediate stays small.
+    """
+    lengths, mu, photons = _check(lengths, mu, photons)
+    weights = np.asarray(weights, dtype=np.float64)
+    weighted = photons * weights
+    factor = np.broadcast_to(np.asarray(factor, dtype=np.float64), lengths.shape[1:])
+    if mu.shape[1] == 1:  # monochromatic: no spectral loop
+        return weighted[0] * factor * np.exp(-np.tensordot(mu[:, 0], lengths, axes=1))
+    out = np.empty(lengths.shape[1:])
+
+    def block(rows):
+        exponent = np.tensordot(mu.T, lengths[:, rows], axes=1)
+        np.negative(exponent, out=exponent)
+        np.exp(exponent, out=exponent)
+        out[rows] = np.tensordot(weighted, exponent, axes=1) * factor[rows]
+
+    for _ in _in_order(block, _row_blocks(mu.shape[1], *lengths.shape[1:])):  # blocks write disjoint rows
+        pass
+    return out
+
+
+def _row_blocks(bins: int, rows: int, cols: int) -> list[slice]:
+    """Blocks of rows whose (bins × pixels) float64 intermediate stays near 2 MiB: it then stays
+    in a core's L2 cache between the exponent, the exp and the weighted sum (measured: 2.1×
+    faster than 32 MiB blocks for 1024², 3 materials, 80 bins on 2 cores)."""
+    step = max(1, 2**18 // (bins * cols))
+    return [slice(start, start + step) for start in range(0, rows, step)]
+
+
+def _in_order(work, items):
+    """``work(item)`` for each item on all cores (NumPy's ufuncs and BLAS release the GIL),
+    yielding results in order, at most two per thread ahead of the consumer (bounded memory)."""
+    threads = min(len(items), os.cpu_count() or 1)
+    if threads <= 1:
+        yield from map(work, items)
+        return
+    with ThreadPoolExecutor(threads) as pool:
+        pending = deque(pool.submit(work, item) for item in items[: 2 * threads])
+        for item in items[2 * threads :]:
+            yield pending.popleft().result()
+            pending.append(pool.submit(work, item))
+        while pending:
+            yield pending.popleft().result()
+
+
+# Above this many expected detected photons per pixel, an integrating detector's compound
+# Poisson signal is drawn as a Gaussian with its exact mean and variance (one draw per pixel
+# instead of one per bin): its skewness is below 1/sqrt(1000) ≈ 0.03 there. Below it, every
+# bin is drawn from its own Poisson law.
+EXACT_BELOW_PHOTONS = 1000.0
+
+
+def sampled_signal(lengths, mu, photons, efficiency, energies, factor, counting: bool, rng) -> np.ndarray:
+    """One noisy realisation ``(rows, cols)`` float64 of the detected signal.
+
+    Counting: Poisson(Σ_b η_b n_b), one draw per pixel (a sum of independent Poisson variables
+    is Poisson). Integrating: Σ_b E_b · Poisson(η_b n_b): drawn bin by bin where a pixel expects
+    fewer than :data:`EXACT_BELOW_PHOTONS` photons, else as a Gaussian with the same mean
+    Σ E η n and variance Σ E² η n.
+    """
+    lengths, mu, photons = _check(lengths, mu, photons)
+    efficiency = np.asarray(efficiency, dtype=np.float64)
+    energies = np.asarray(energies, dtype=np.float64)
+    if counting:
+        mean = expected_signal(lengths, mu, photons, efficiency, factor)
+        return rng.poisson(mean).astype(np.float64)
+    factor = np.broadcast_to(np.asarray(factor, dtype=np.float64), lengths.shape[1:])
+    out = np.empty(lengths.shape[1:])
+
+    def moments(rows):  # the deterministic part, computed on all cores
+        detected = transmitted_photons(lengths[:, rows], mu, photons * efficiency, factor[rows])
+        mean = np.tensordot(energies, detected, axes=1)
+        spread = np.sqrt(np.tensordot(energies**2, detected, axes=1))
+        few = detected.sum(axis=0) < EXACT_BELOW_PHOTONS
+        return mean, spread, few, detected[:, few]
+
+    # Draws happen block after block in row order, so the bytes depend on the seed only.
+    blocks = _row_blocks(mu.shape[1], *lengths.shape[1:])
+    for rows, (mean, spread, few, detected_few) in zip(blocks, _in_order(moments, blocks)):
+        chunk = mean + spread * rng.standard_normal(mean.shape)
+        if few.any():
+            chunk[few] = energies @ rng.poisson(detected_few)
+        out[rows] = chunk
+    return out
+
+
+@dataclass(frozen=True)
+class Normalised:
+    """A radiograph as a scanner reports it: raw signal, flat/dark-normalised, −log."""
+
+    raw: np.ndarray  # detector signal (keV deposited, or counts)
+    transmission: np.ndarray  # (raw − dark) / (flat − dark), starved pixels clamped
+    line_integral: np.ndarray  # −ln(transmission)
+    starved: int  # pixels whose raw − dark was ≤ 0 (clamped before −log)
+
+
+def normalise(raw: np.ndarray, flat, dark, floor) -> Normalised:
+    """Flat/dark correction and −log as scanners do it.
+
+    Pixels with ``raw − dark ≤ 0`` (photon starvation, or noise and offsets) cannot be logged:
+    they are set to ``floor`` (a small positive signal, e.g. half a mean photon), counted, and
+    the count returned, so a caller can report it.
+    """
+    flat = np.asarray(flat, dtype=np.float64)
+    if np.any(flat - dark <= 0):
+        raise PhysicsError("the flat field is not above the dark level: no photons reach the detector; "
+                           "raise the exposure (mas) or lower the dark offset")
+    signal = np.asarray(raw, dtype=np.float64) - dark
+    starved = signal <= 0
+    signal = np.where(starved, floor, signal)
+    transmission = signal / (flat - dark)
+    return Normalised(raw=raw, transmission=transmission, line_integral=-np.log(transmission), starved=int(starved.sum()))
+
+
+def _check(lengths, mu, photons):
+    lengths = np.asarray(lengths)
+    mu = np.asarray(mu, dtype=np.float64)
+    photons = np.asarray(photons, dtype=np.float64)
+    if lengths.ndim != 3:
+        raise PhysicsError(f"lengths must be (channels, rows, cols), got shape {lengths.shape}")
+    if mu.ndim != 2 or mu.shape[0] != lengths.shape[0]:
+        raise PhysicsError(f"mu must be (channels={lengths.shape[0]}, bins), got shape {mu.shape}")
+    if photons.shape != (mu.shape[1],):
+        raise PhysicsError(f"photons must have one value per energy bin ({mu.shape[1]}), got shape {photons.shape}")
+    return lengths, mu, photons

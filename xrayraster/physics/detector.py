@@ -1,0 +1,102 @@
+"""The detector: how absorbed photons become a signal, and the blur and electronic noise it adds."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.choices import DETECTOR_MODES, check_choice
+from ..core.errors import PhysicsError
+
+
+@dataclass(frozen=True)
+class Detector:
+    """A flat-panel detector.
+
+    * ``mode``: ``"integrating"`` (signal = energy deposited, keV: Σ E·η·n) or ``"counting"``
+      (signal = photons counted: Σ η·n).
+    * ``scintillator`` (a :class:`~xrayraster.Material`) and ``scintillator_mm``: absorption
+      efficiency η(E) = 1 − exp(−μ(E)·thickness). Without one, η = 1 (every photon counts).
+    * ``blur_sigma_px``: Gaussian point-spread (standard deviation, pixels), applied to the
+      detected signal (after quantum noise, as scintillator light spreads), or ``psf``: a
+      user-supplied odd-sized 2-D kernel (normalised to sum 1). Not both.
+    * ``electronic_noise``: standard deviation of additive Gaussian read noise, signal units.
+    * ``dark``: mean dark signal (offset), signal units; dark fields average to it.
+    """
+
+    mode: str = "integrating"
+    scintillator: object | None = None
+    scintillator_mm: float = 0.0
+    blur_sigma_px: float = 0.0
+    psf: tuple | None = None
+    electronic_noise: float = 0.0
+    dark: float = 0.0
+
+    def __post_init__(self):
+        check_choice(self.mode, DETECTOR_MODES, "detector mode", PhysicsError)
+        for name in ("scintillator_mm", "blur_sigma_px", "electronic_noise", "dark"):
+            value = getattr(self, name)
+            if not np.isfinite(value) or value < 0:
+                raise PhysicsError(f"detector {name} must be a finite number >= 0, got {value!r}")
+        if (self.scintillator is None) != (self.scintillator_mm == 0):
+            raise PhysicsError("detector: give both scintillator (a Material) and scintillator_mm > 0, or neither")
+        if self.psf is not None:
+            kernel = np.asarray(self.psf, dtype=np.float64)
+            if kernel.ndim != 2 or kernel.shape[0] % 2 == 0 or kernel.shape[1] % 2 == 0:
+                raise PhysicsError(f"detector psf must be a 2-D kernel of odd size, got shape {kernel.shape}")
+            if not np.all(np.isfinite(kernel)) or np.any(kernel < 0) or kernel.sum() <= 0:
+                raise PhysicsError("detector psf must be finite, non-negative and not all zero")
+            if self.blur_sigma_px:
+                raise PhysicsError("detector: give blur_sigma_px or psf, not both")
+            object.__setattr__(self, "psf", tuple(map(tuple, kernel / kernel.sum())))
+
+    @property
+    def counting(self) -> bool:
+        return self.mode == "counting"
+
+    def efficiency(self, energies_kev) -> np.ndarray:
+        """Absorption efficiency η(E) of the scintillator (1 without one)."""
+        energies = np.asarray(energies_kev, dtype=np.float64)
+        if self.scintillator is None:
+            return np.ones_like(energies)
+        return -np.expm1(-self.scintillator.attenuation(energies) * self.scintillator_mm)
+
+    def weights(self, energies_kev) -> np.ndarray:
+        """Expected signal per incident photon of each energy: E·η (integrating) or η (counting)."""
+        energies = np.asarray(energies_kev, dtype=np.float64)
+        eta = self.efficiency(energies)
+        return eta if self.counting else energies * eta
+
+    def blur(self, image: np.ndarray) -> np.ndarray:
+        """The point-spread applied to ``image`` (edges extended); unchanged without blur."""
+        if self.psf is not None:
+            return _convolve2d(image, np.asarray(self.psf))
+        if self.blur_sigma_px == 0:
+            return image
+        radius = max(1, int(np.ceil(4 * self.blur_sigma_px)))
+        x = np.arange(-radius, radius + 1)
+        g = np.exp(-0.5 * (x / self.blur_sigma_px) ** 2)
+        g /= g.sum()
+        return _convolve2d(_convolve2d(image, g[None, :]), g[:, None])  # separable
+
+    def read_out(self, signal: np.ndarray, rng) -> np.ndarray:
+        """Blur, dark offset and (with ``rng``) electronic noise: what the panel reports."""
+        out = self.blur(signal) + self.dark
+        if rng is not None and self.electronic_noise > 0:
+            out = out + rng.normal(0.0, self.electronic_noise, out.shape)
+        return out
+
+
+def _convolve2d(image: np.ndarray, kernel: np.ndarray) -> np.ndarray:
+    """Direct 2-D convolution with a small kernel, edges extended."""
+    kernel = kernel[::-1, ::-1]
+    ky, kx = kernel.shape
+    padded = np.pad(image, ((ky // 2, ky // 2), (kx // 2, kx // 2)), mode="edge")
+    out = np.zeros(image.shape)
+    rows, cols = image.shape
+    for i in range(ky):
+        for j in range(kx):
+            if kernel[i, j]:
+                out += kernel[i, j] * padded[i : i + rows, j : j + cols]
+    return out

@@ -1,0 +1,81 @@
+"""One radiograph from per-material path lengths: spectrum × materials × detector (+ noise).
+
+The flat field is the noise-free signal with nothing in the beam (a scanner averages many flats),
+the dark field the detector's mean offset; ``transmission`` and ``lineint`` are normalised by
+them as a scanner does (:func:`xrayraster.physics.beer_lambert.normalise`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.choices import RADIOGRAPH_OUTPUTS, check_choice
+from ..core.errors import PhysicsError
+from . import beer_lambert
+from .detector import Detector
+
+
+@dataclass(frozen=True)
+class Radiograph:
+    image: np.ndarray  # float32 (rows, cols): raw signal, transmission or line integral
+    output: str
+    starved: int  # pixels clamped before −log (photon starvation), 0 for raw output
+    bins: int  # energy bins used
+    dropped: float  # share of the open-beam signal in the bins dropped (0 when none were)
+
+
+def attenuation_table(materials, energies_kev) -> np.ndarray:
+    """μ (mm⁻¹) per material channel and energy bin, ``(channels, bins)``.
+
+    Materials must provide ``attenuation(energies_kev)`` (:class:`~xrayraster.Material`).
+    """
+    table = []
+    for m in materials:
+        if not hasattr(m, "attenuation"):
+            raise PhysicsError(
+                f"material {m!r} has no attenuation data: give objects an xr.Material "
+                "(e.g. xr.Material.from_formula('H2O', density=1.0)), not a plain name"
+            )
+        table.append(np.asarray(m.attenuation(energies_kev), dtype=np.float64))
+    return np.stack(table)
+
+
+# Energy bins whose combined share of the open-beam signal is at most this are dropped. Behind
+# an object the share can differ (hard bins gain weight behind thick material), so the error is
+# measured where it matters (tests/test_radiograph.py): 80 kVp W + 2 mm Al, CsI 0.5 mm, 0-60 mm
+# of aluminium: 20 of 158 bins dropped, transmission within 2.2e-7 relative of all bins.
+BIN_TOLERANCE = 1e-6
+
+
+def radiograph(lengths, materials, spectrum, detector: Detector, factor, *, output="lineint", noise=False, rng=None,
+               bin_tolerance: float = BIN_TOLERANCE) -> Radiograph:
+    """The radiograph of one view.
+
+    ``lengths``: ``(channels, rows, cols)`` mm, channels in ``materials`` order; ``spectrum``:
+    photons per mm² at 1 m per bin (:class:`~xrayraster.Spectrum`); ``factor``: per-pixel photon
+    factor (:func:`~xrayraster.physics.beer_lambert.pixel_photon_factor`); ``noise``: draw quantum noise
+    (and the detector's electronic noise) from ``rng`` (a ``numpy.random.Generator``);
+    ``bin_tolerance``: see :data:`BIN_TOLERANCE` (0 keeps every non-empty bin).
+    """
+    check_choice(output, RADIOGRAPH_OUTPUTS, "output", PhysicsError)
+    if noise and rng is None:
+        raise PhysicsError("noise=True needs rng (a numpy.random.Generator, e.g. np.random.default_rng(seed))")
+    keep, dropped = spectrum.trim_mask(bin_tolerance, detector.weights(spectrum.energies))
+    energies = spectrum.energies[keep]
+    photons = spectrum.fluence[keep]
+    mu = attenuation_table(materials, energies)
+    weights = detector.weights(energies)
+    if noise:
+        quantum = beer_lambert.sampled_signal(lengths, mu, photons, detector.efficiency(energies), energies, factor, detector.counting, rng)
+    else:
+        quantum = beer_lambert.expected_signal(lengths, mu, photons, weights, factor)
+    raw = detector.read_out(quantum, rng if noise else None)
+    if output == "raw":
+        return Radiograph(raw.astype(np.float32), output, 0, len(energies), dropped)
+    flat = detector.blur(np.broadcast_to((photons * weights).sum() * np.asarray(factor, dtype=np.float64), raw.shape)) + detector.dark
+    floor = 0.5 * float((photons * weights).sum() / photons.sum())  # half a mean detected photon
+    normalised = beer_lambert.normalise(raw, flat, detector.dark, floor)
+    image = normalised.transmission if output == "transmission" else normalised.line_integral
+    return Radiograph(image.astype(np.float32), output, normalised.starved, len(energies), dropped)

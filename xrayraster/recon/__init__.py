@@ -1,0 +1,1 @@
+"""Reconstruction in OpenCL: device context, FDK weights, ramp filter, backprojection."""

@@ -1,0 +1,1 @@
+"""What is scanned: closed meshes, scenes of objects with priorities and labels, materials."""

@@ -1,0 +1,274 @@
+"""Materials: elemental composition + density, and their X-ray attenuation from xraylib.
+
+A :class:`Material` is an immutable, hashable value. Two materials are equal when their
+composition (atomic number, mass fraction) and density are equal; the ``name`` is a label only.
+This is what lets the scene collapse objects made of the same stuff into one output channel::
+
+    water = Material.from_formula("H2O", density=1.0)
+    same = Material.from_mass_fractions({"H": 0.1119, "O": 0.8881}, 1.0)   # not equal: 4 digits
+    carbon = Material.element("C", density=1.72)
+    epoxy = Material.from_mass_fractions({"C": 0.404, "H": 0.481, "Cl": 0.019, "O": 0.096}, 1.2)
+
+Canonical form (applied on every construction, so equal compositions compare equal):
+elements sorted by atomic number, zero fractions dropped, fractions normalised to sum 1 and
+rounded to 12 significant digits.
+
+Units: density g/cm³, energies keV, :meth:`Material.mass_attenuation` cm²/g,
+:meth:`Material.attenuation` mm⁻¹ (the package's internal unit; docs/physics.md).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, field
+from functools import lru_cache
+from typing import Mapping
+
+import numpy as np
+import xraylib
+
+from ..core.errors import MaterialError
+
+try:  # array interface shipped with the xraylib wheels; same C code as the scalar functions
+    import xraylib_np as _xraylib_np
+except ImportError:  # pragma: no cover - older/partial installs: scalar loop with a cache
+    _xraylib_np = None
+
+__all__ = ["Material", "MaterialError", "ENERGY_MIN_KEV", "ENERGY_MAX_KEV", "Z_MAX"]
+
+# Range over which xraylib 4.3's cross-section splines are defined (measured: CS_Total raises
+# "Spline extrapolation is not allowed" above 800 keV and "Energy must be strictly positive" /
+# extrapolation below 0.1 keV). Outside it we raise rather than extrapolate.
+ENERGY_MIN_KEV = 0.1
+ENERGY_MAX_KEV = 800.0
+# Highest atomic number with cross sections in xraylib (Z 99+ raise "Z out of range").
+Z_MAX = 98
+
+_SUM_TOL_SILENT = 1e-6  # |sum - 1| up to this: normalised silently
+_SUM_TOL_WARN = 1e-2  # up to this: normalised with a warning; beyond it: error
+_SIG_DIGITS = 12  # fractions are rounded to this many significant digits
+
+
+def _round_sig(x: float, digits: int = _SIG_DIGITS) -> float:
+    return float(f"{x:.{digits - 1}e}") if x != 0.0 else 0.0
+
+
+def _symbol(z: int) -> str:
+    return xraylib.AtomicNumberToSymbol(int(z))
+
+
+def _atomic_number(symbol) -> int:
+    """Element symbol (case-sensitive, e.g. "Cl") or atomic number → Z, validated."""
+    if isinstance(symbol, (int, np.integer)) and not isinstance(symbol, bool):
+        z = int(symbol)
+        if not 1 <= z <= Z_MAX:
+            raise MaterialError(f"element: atomic number {z} is out of range; use 1..{Z_MAX} (H..Cf)")
+        return z
+    if not isinstance(symbol, str):
+        raise MaterialError(f"element: expected a chemical symbol such as 'Al' or an atomic number, got {symbol!r}")
+    try:
+        z = xraylib.SymbolToAtomicNumber(symbol.strip())
+    except ValueError:
+        raise MaterialError(
+            f"element: unknown chemical symbol {symbol!r}; use a symbol such as 'C', 'Al' or 'Cl' "
+            "(case matters)"
+        ) from None
+    if not 1 <= z <= Z_MAX:
+        raise MaterialError(f"element: {symbol!r} (Z={z}) has no cross sections in xraylib; use Z <= {Z_MAX}")
+    return z
+
+
+def _canonical(composition) -> tuple[tuple[int, float], ...]:
+    """Validate and canonicalise ((Z, mass fraction), ...): see the module docstring."""
+    try:
+        items = [(z, w) for z, w in composition]
+    except (TypeError, ValueError):
+        raise MaterialError(
+            "composition: expected pairs (atomic number, mass fraction), e.g. ((1, 0.112), (8, 0.888))"
+        ) from None
+    if not items:
+        raise MaterialError("composition: no elements given; give at least one element with a mass fraction")
+    merged: dict[int, float] = {}
+    for z, w in items:
+        z = _atomic_number(z)
+        try:
+            w = float(w)
+        except (TypeError, ValueError):
+            raise MaterialError(f"composition: mass fraction of {_symbol(z)} must be a number, got {w!r}") from None
+        if not math.isfinite(w) or w < 0:
+            raise MaterialError(
+                f"composition: mass fraction of {_symbol(z)} must be finite and >= 0, got {w!r}"
+            )
+        merged[z] = merged.get(z, 0.0) + w
+    total = math.fsum(merged.values())
+    if total == 0:
+        raise MaterialError("composition: mass fractions sum to 0; give positive mass fractions summing to 1")
+    dev = abs(total - 1.0)
+    if dev > _SUM_TOL_WARN:
+        raise MaterialError(
+            f"composition: mass fractions sum to {total:.6g}, not 1; give fractions (not percent) "
+            f"summing to 1 (within {_SUM_TOL_WARN:g})"
+        )
+    if dev > _SUM_TOL_SILENT:
+        warnings.warn(
+            f"composition: mass fractions sum to {total:.6g}, not 1; normalised to sum to 1",
+            UserWarning,
+            stacklevel=_caller_stacklevel(),
+        )
+    # A composition that is already canonical (rounded, sum within ~n*5e-13 of 1) passes through
+    # unchanged, so canonicalisation is idempotent and repr() round-trips exactly.
+    if dev > 1e-10:
+        merged = {z: w / total for z, w in merged.items()}
+    return tuple((z, _round_sig(merged[z])) for z in sorted(merged) if merged[z] > 0)
+
+
+def _caller_stacklevel() -> int:
+    """stacklevel that points a warning at the first frame outside this module."""
+    import sys
+
+    level, frame = 1, sys._getframe(1)
+    while frame is not None and (
+        frame.f_code.co_filename == __file__  # this module, or the dataclass-generated __init__:
+        or (frame.f_code.co_name == "__init__" and isinstance(frame.f_locals.get("self"), Material))
+    ):
+        level, frame = level + 1, frame.f_back
+    return level
+
+
+def _check_density(density) -> float:
+    try:
+        d = float(density)
+    except (TypeError, ValueError):
+        raise MaterialError(f"density: expected a number in g/cm³, got {density!r}") from None
+    if not math.isfinite(d) or d <= 0:
+        raise MaterialError(f"density: must be finite and > 0 (g/cm³), got {density!r}")
+    return d
+
+
+def _check_energies(energies_kev) -> np.ndarray:
+    try:
+        e = np.asarray(energies_kev, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise MaterialError(f"energies: expected numbers in keV, got {energies_kev!r}") from None
+    if e.size and not (np.all(np.isfinite(e)) and e.min() >= ENERGY_MIN_KEV and e.max() <= ENERGY_MAX_KEV):
+        bad = e[~(np.isfinite(e) & (e >= ENERGY_MIN_KEV) & (e <= ENERGY_MAX_KEV))]
+        raise MaterialError(
+            f"energies: {bad.ravel()[:5].tolist()} keV outside xraylib's cross-section range; "
+            f"use finite energies in [{ENERGY_MIN_KEV:g}, {ENERGY_MAX_KEV:g}] keV"
+        )
+    return e
+
+
+@lru_cache(maxsize=65536)
+def _cs_total_scalar(z: int, e: float) -> float:
+    return xraylib.CS_Total(z, e)
+
+
+def _cs_total(zs: np.ndarray, e_flat: np.ndarray) -> np.ndarray:
+    """CS_Total for every (Z, E): shape (len(zs), len(e_flat)), cm²/g."""
+    if _xraylib_np is not None:
+        return _xraylib_np.CS_Total(zs.astype(np.int64), np.ascontiguousarray(e_flat, dtype=np.float64))
+    return np.array([[_cs_total_scalar(int(z), float(x)) for x in e_flat] for z in zs], dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class Material:
+    """An element, compound or mixture with a density.
+
+    ``composition`` is ((Z, mass fraction), ...) sorted by Z, fractions summing to 1;
+    ``density`` in g/cm³. Equality and hashing use composition and density only, never
+    ``name``. Build with :meth:`element`, :meth:`from_formula` or :meth:`from_mass_fractions`,
+    or directly (the composition is validated and canonicalised the same way).
+    """
+
+    name: str = field(compare=False)
+    composition: tuple[tuple[int, float], ...]
+    density: float
+
+    def __post_init__(self):
+        object.__setattr__(self, "composition", _canonical(self.composition))
+        object.__setattr__(self, "density", _check_density(self.density))
+        if not isinstance(self.name, str):
+            raise MaterialError(f"name: expected a string, got {self.name!r}")
+
+    def __repr__(self) -> str:
+        return f"Material(name={self.name!r}, composition={self.composition!r}, density={self.density!r})"
+
+    # -- constructors ------------------------------------------------------------------------
+
+    @classmethod
+    def element(cls, symbol, density: float | None = None, name: str | None = None) -> Material:
+        """A pure element; ``density`` defaults to xraylib's ElementDensity (g/cm³)."""
+        z = _atomic_number(symbol)
+        if density is None:
+            density = xraylib.ElementDensity(z)
+        return cls(name if name is not None else _symbol(z), ((z, 1.0),), density)
+
+    @classmethod
+    def from_formula(cls, formula: str, density: float, name: str | None = None) -> Material:
+        """A compound from a chemical formula such as "H2O", "CaCO3" or "Ca(OH)2"."""
+        if not isinstance(formula, str):
+            raise MaterialError(f"formula: expected a chemical formula string such as 'H2O', got {formula!r}")
+        try:
+            parsed = xraylib.CompoundParser(formula)
+        except ValueError as exc:
+            raise MaterialError(
+                f"formula: cannot parse {formula!r} ({exc}); write it like 'H2O' or 'Ca(OH)2' "
+                "(symbols case-sensitive)"
+            ) from None
+        comp = tuple(zip(parsed["Elements"], parsed["massFractions"]))
+        return cls(name if name is not None else formula, comp, density)
+
+    @classmethod
+    def from_mass_fractions(
+        cls, fractions: Mapping[str, float], density: float, name: str | None = None
+    ) -> Material:
+        """A mixture from {symbol: mass fraction}, e.g. {"C": 0.404, "H": 0.481, "Cl": 0.019, "O": 0.096}.
+
+        Fractions (not percent) must be finite, >= 0 and sum to 1; a sum off by more than 1e-6
+        but at most 1e-2 is normalised with a warning, anything further off is an error.
+        """
+        if not isinstance(fractions, Mapping):
+            raise MaterialError(
+                f"fractions: expected a mapping {{symbol: mass fraction}}, got {type(fractions).__name__}"
+            )
+        zs = [_atomic_number(s) for s in fractions]
+        material = cls("", tuple(zip(zs, fractions.values())), density)
+        if name is None:  # compact percent string in the caller's order, e.g. "C40.4H48.1Cl1.9O9.6"
+            w = dict(material.composition)
+            name = "".join(f"{_symbol(z)}{100 * w[z]:.3g}" for z in dict.fromkeys(zs) if z in w)
+        object.__setattr__(material, "name", name)
+        return material
+
+    # -- properties --------------------------------------------------------------------------
+
+    @property
+    def mass_fractions(self) -> dict[str, float]:
+        """{symbol: mass fraction}, sorted by atomic number."""
+        return {_symbol(z): w for z, w in self.composition}
+
+    # -- attenuation -------------------------------------------------------------------------
+
+    def mass_attenuation(self, energies_kev) -> np.ndarray:
+        """Mass attenuation coefficient μ/ρ in cm²/g at ``energies_kev`` (same shape, float64).
+
+        This is the *total cross section with coherent scattering* — photoelectric absorption
+        + incoherent (Compton) + coherent (Rayleigh) — i.e. NIST XCOM's "total attenuation with
+        coherent scattering", which is what determines the narrow-beam transmission
+        exp(-μ·L) a CT simulator models (every scattered photon is removed from the primary
+        beam). Per element it is ``xraylib.CS_Total(Z, E)``, mixed by mass fraction:
+        μ/ρ = Σ_i w_i (μ/ρ)_i (the same rule as ``xraylib.CS_Total_CP``).
+
+        Energies must be finite and within [0.1, 800] keV, the range of xraylib's tables;
+        otherwise :class:`MaterialError`.
+        """
+        e = _check_energies(energies_kev)
+        zs = np.array([z for z, _ in self.composition], dtype=np.int64)
+        ws = np.array([w for _, w in self.composition], dtype=np.float64)
+        cs = _cs_total(zs, e.reshape(-1))  # (elements, energies)
+        return (ws @ cs).reshape(e.shape)
+
+    def attenuation(self, energies_kev) -> np.ndarray:
+        """Linear attenuation coefficient μ in mm⁻¹ (= μ/ρ [cm²/g] · ρ [g/cm³] / 10)."""
+        return self.mass_attenuation(energies_kev) * (self.density / 10.0)

@@ -1,0 +1,1 @@
+"""Scene + scan geometry + physics -> projections: GL path lengths composed with the physics."""
