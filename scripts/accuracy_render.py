@@ -20,7 +20,7 @@ import numpy as np
 import trimesh
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from reference import box_chord, cone_rays, cylinder_chord, random_rotation, sphere_chord  # noqa: E402
+from references.chords import box_chord, cone_rays, cylinder_chord, random_rotation, sphere_chord  # noqa: E402
 
 import xrayraster as xr  # noqa: E402
 

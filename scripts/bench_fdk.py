@@ -6,7 +6,7 @@ Cases (cone beam, full circle): 128³ voxels from 180 views of 128², 256³ from
 source 100 mm from the axis, detector 200 mm (magnification 2), detector pixels 1.25× the
 magnified voxel so the whole phantom is in every view.
 
-Phantom: the 3-D Shepp–Logan head (tests/phantoms.py, Schabel's modified table) scaled to a
+Phantom: the 3-D Shepp–Logan head (references/phantoms.py, Schabel's modified table) scaled to a
 12 mm "radius", μ of the skull 0.05 mm⁻¹ (0.5 cm⁻¹), projected exactly in float64 (chord lengths,
 one ray per pixel centre) and stored as float32; projections are cached in out/bench_fdk_cache/.
 
@@ -50,7 +50,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 import xrayraster as xr  # noqa: E402
 
 import bench_render as br  # noqa: E402
-from phantoms import project, shepp_logan_3d, sphere, voxel_values  # noqa: E402
+from references.phantoms import project, shepp_logan_3d, sphere, voxel_values  # noqa: E402
 from rtk_peer import rtk_available, rtk_fdk  # noqa: E402
 
 say = br.say

@@ -6,12 +6,8 @@ into a failure."""
 from __future__ import annotations
 
 import os
-import sys
-from pathlib import Path
 
 import pytest
-
-sys.path.insert(0, str(Path(__file__).parent))  # tests/reference.py
 
 
 def _require(capability: str, reason: str) -> None:

@@ -16,7 +16,7 @@ from xrayraster import cli
 from xrayraster.io.scan_file import geometry_from_repr, read_scan_file
 from xrayraster.io.tiff import read_tiff_info, write_tiff
 
-from phantoms import project, sphere
+from references.phantoms import project, sphere
 
 GEOMETRY = xr.ConeBeamGeometry(100, 200, (40, 48), 0.8, xr.full_circle(60), detector_offset=(0.4, -0.3))
 VOLUME = xr.VolumeGeometry((12, 20, 24), (0.6, 0.5, 0.5), offset=(0.2, 0.0, -0.1))

@@ -1,5 +1,5 @@
 """FDK / FBP: the OpenCL kernels against the float64 NumPy reference, and both against analytic
-phantoms (exact chord lengths, tests/phantoms.py), our own renderer, and bad input."""
+phantoms (exact chord lengths, references/phantoms.py), our own renderer, and bad input."""
 
 from __future__ import annotations
 
@@ -15,8 +15,8 @@ from xrayraster.recon.fdk import ReconstructionError, fdk
 from xrayraster.core.geometry import GeometryError
 from xrayraster.core.choices import FILTERS
 
-from fdk_reference import fdk_reference
-from phantoms import project, shepp_logan_3d, sphere, voxel_values
+from references.fdk import fdk_reference
+from references.phantoms import project, shepp_logan_3d, sphere, voxel_values
 
 MU = 0.02  # mm⁻¹
 SMALL_VOLUME = xr.VolumeGeometry((20, 24, 28), (0.5, 0.45, 0.4), offset=(0.3, -0.2, 0.1))

@@ -2,7 +2,7 @@
 
 Expected positions are written out by hand from the conventions in the module docstring
 (source at R_z(θ)·(0, −SOD, 0), detector centre at R_z(θ)·(0, SDD − SOD, 0), u = R_z(θ)·(pu, 0, 0),
-v = (0, 0, pv), offsets (row, col) along v and u), or come from tests/reference.py.
+v = (0, 0, pv), offsets (row, col) along v and u), or come from references/chords.py.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import xrayraster.core.geometry as geometry
-from reference import cone_rays, parallel_rays
+from references.chords import cone_rays, parallel_rays
 from xrayraster.core.geometry import (
     ConeBeamGeometry,
     GeometryError,

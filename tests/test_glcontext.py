@@ -8,7 +8,7 @@ import ctypes.util
 import numpy as np
 import pytest
 import trimesh
-from reference import box_chord, cone_rays
+from references.chords import box_chord, cone_rays
 
 import xrayraster as xr
 from xrayraster.gl import context as glcontext

@@ -1,4 +1,4 @@
-"""The analytic phantom reference (tests/phantoms.py) against independent facts: closed-form chords,
+"""The analytic phantom reference (references/phantoms.py) against independent facts: closed-form chords,
 brute-force ray marching, mass conservation, phantom3d's own membership formula, and where the
 scanner convention says an off-axis object must appear on the detector."""
 
@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from phantoms import (
+from references.phantoms import (
     SHEPP_LOGAN_3D,
     Ellipsoid,
     _PHANTOM3D_MODIFIED_SHEPP_LOGAN,

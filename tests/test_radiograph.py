@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import trimesh
-from reference import box_chord, cone_rays
+from references.chords import box_chord, cone_rays
 
 import xrayraster as xr
 from xrayraster.physics import beer_lambert as physics

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from reference import cone_rays, random_rotation
+from references.chords import cone_rays, random_rotation
 from xrayraster.core.geometry import ConeBeamGeometry, ParallelBeamGeometry, VectorGeometry
 from xrayraster.gl.rays import view_rays
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import trimesh
-from reference import box_chord, cone_rays, cylinder_chord, parallel_rays, random_rotation, sphere_chord
+from references.chords import box_chord, cone_rays, cylinder_chord, parallel_rays, random_rotation, sphere_chord
 
 import xrayraster as xr
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import trimesh
-from reference import box_chord, cone_rays, convex_chord, random_rotation
+from references.chords import box_chord, cone_rays, convex_chord, random_rotation
 
 import xrayraster as xr
 

@@ -6,7 +6,7 @@
 
 The algorithm and its weights are in :mod:`xrayraster.recon.fdk_weights`, the filter in
 :mod:`xrayraster.recon.ramp_filter`, the kernels in ``shaders/fdk_filter.cl`` and
-``shaders/fdk_backproject.cl``. ``tests/fdk_reference.py`` is the same algorithm in float64
+``shaders/fdk_backproject.cl``. ``references/fdk.py`` is the same algorithm in float64
 NumPy, against which the kernels are tested.
 
 Memory: the volume is reconstructed in z-slabs that fit the device next to one batch of filtered
