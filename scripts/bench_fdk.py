@@ -1,4 +1,3 @@
-#!/usr/bin/env python3
 """FDK benchmark: xrayraster's OpenCL FDK beside RTK's CPU FDK, same projections, same grid.
 
 Cases (cone beam, full circle): 128³ voxels from 180 views of 128², 256³ from 360 of 256²,
@@ -13,7 +12,7 @@ one ray per pixel centre) and stored as float32; projections are cached in out/b
 Both codes reconstruct with the plain ramp (Ram-Lak), from identical float32 arrays. Times:
 ours = ``xr.fdk`` with a warm ``CLContext`` (kernels compiled), the compile time of the first
 call measured separately; RTK = ``FDKConeBeamReconstructionFilter.Update()`` with 2 threads, 16
-projections per pass (scripts/rtk_peer.py). Best of ``repeats`` each. Voxel updates per second =
+projections per pass (scripts/peers/rtk_peer.py). Best of ``repeats`` each. Voxel updates per second =
 voxels × views / seconds.
 
 Errors against the analytic truth (voxel-centre values): RMSE over voxels whose 3×3×3
@@ -24,36 +23,27 @@ difference between ours and RTK, relative to the skull's μ.
 
 Usage::
 
-    python scripts/bench_fdk.py                  # all sizes (~15 min on 2 cores, most of it RTK at 512³)
-    python scripts/bench_fdk.py --sizes 128 256  # a subset
-    python scripts/bench_fdk.py --quick          # 64³ smoke test
+    python -m scripts.bench_fdk                  # all sizes (~15 min on 2 cores, most of it RTK at 512³)
+    python -m scripts.bench_fdk --sizes 128 256  # a subset
+    python -m scripts.bench_fdk --quick          # 64³ smoke test
+
+Writes out/bench_fdk.json and docs/bench_fdk.png (``--quick``: out/bench_fdk_quick.json and .png).
 """
 
 from __future__ import annotations
 
-import argparse
-import math
 import os
-import platform
-import shlex
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "scripts"))
-sys.path.insert(0, str(ROOT / "tests"))
+import xrayraster as xr
+from references.phantoms import project, shepp_logan_3d, sphere, voxel_values
+from scripts import common
+from scripts.common import best_of, say
+from scripts.peers import rtk_peer
 
-import xrayraster as xr  # noqa: E402
-
-import bench_render as br  # noqa: E402
-from references.phantoms import project, shepp_logan_3d, sphere, voxel_values  # noqa: E402
-from rtk_peer import rtk_available, rtk_fdk  # noqa: E402
-
-say = br.say
 FOV_MM = 25.6
 SOD, SDD = 100.0, 200.0
 MU = 0.05  # mm⁻¹, the skull
@@ -96,15 +86,6 @@ def edge_free_mask(truth: np.ndarray) -> np.ndarray:
     return np.ptp(window, axis=(-1, -2, -3)) == 0
 
 
-def best_of(fn, repeats: int):
-    best, out = math.inf, None
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        out = fn()
-        best = min(best, time.perf_counter() - t0)
-    return best, out
-
-
 def run_case(n: int, ctx, with_rtk: bool, cache: Path) -> dict:
     g, vol = geometry(n), volume(n)
     views = g.num_views
@@ -124,7 +105,7 @@ def run_case(n: int, ctx, with_rtk: bool, cache: Path) -> dict:
     say(f"  ours: {t:.3f} s ({rec['updates'] / t / 1e9:.2f} G voxel-updates/s; first call incl. compile "
         f"{rec['ours_first_call_s']:.2f} s), RMSE away from edges {rec['ours_rmse_rel']:.5f} of μ_skull")
     if with_rtk:
-        runs = [rtk_fdk(p, g, vol, threads=2) for _ in range(REPEATS[n])]
+        runs = [rtk_peer.rtk_fdk(p, g, vol, threads=2) for _ in range(REPEATS[n])]
         rtk = runs[-1]["volume"]
         rec["rtk_s"] = min(r["seconds"] for r in runs)
         rec["rtk_rmse_rel"] = float(np.sqrt(np.mean((rtk[mask] - truth[mask]) ** 2)) / MU)
@@ -142,82 +123,50 @@ def run_case(n: int, ctx, with_rtk: bool, cache: Path) -> dict:
         rec["ours_sphere_err"] = float(xr.fdk(ps, g, vol, context=ctx).data[inner].mean() / 10.0 / MU - 1)
         line = f"  sphere inner-half mean error: ours {rec['ours_sphere_err']:+.4%}"
         if with_rtk:
-            rec["rtk_sphere_err"] = float(rtk_fdk(ps, g, vol, threads=2)["volume"][inner].mean() / MU - 1)
+            rec["rtk_sphere_err"] = float(rtk_peer.rtk_fdk(ps, g, vol, threads=2)["volume"][inner].mean() / MU - 1)
             line += f", RTK {rec['rtk_sphere_err']:+.4%}"
         say(line)
     return rec
 
 
 def plot(records: list[dict], path: Path) -> Path | None:
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError as exc:
-        say(f"plot skipped: matplotlib unavailable ({exc})")
+    plt = common.pyplot()
+    if plt is None:
         return None
     fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11, 4.5))
     for key, label, colour in (("ours", "xrayraster (OpenCL, PoCL CPU)", "C0"), ("rtk", "RTK 2 threads", "C3")):
         rs = [r for r in records if f"{key}_s" in r]
         if not rs:
             continue
-        ax.plot([r["size"] for r in rs], [r[f"{key}_s"] for r in rs], "o-", color=colour, label=label)
-        for r in rs:
-            ax.annotate(f"RMSE {r[f'{key}_rmse_rel']:.4f}", (r["size"], r[f"{key}_s"]), textcoords="offset points",
-                        xytext=(4, -10 if key == "ours" else 6), fontsize=7, color=colour)
-        ax2.plot([r[f"{key}_s"] for r in rs], [r[f"{key}_rmse_rel"] for r in rs], "o-", color=colour, label=label)
-        for r in rs:
-            ax2.annotate(f"{r['size']}³", (r[f"{key}_s"], r[f"{key}_rmse_rel"]), textcoords="offset points", xytext=(4, 4),
-                         fontsize=7, color=colour)
-    ax.set_xscale("log", base=2)
-    ax.set_yscale("log")
-    ax.set_xlabel("n (n³ voxels from 1.4·n views of n² pixels)")
-    ax.set_ylabel("reconstruction time (s), best of runs")
-    ax.set_title("FDK time (labels: RMSE away from edges, fraction of μ)", fontsize=9)
-    ax2.set_xscale("log")
-    ax2.set_xlabel("time (s)")
-    ax2.set_ylabel("RMSE away from edges / μ_skull (3-D Shepp–Logan)")
-    ax2.set_title("time vs error", fontsize=9)
-    for a in (ax, ax2):
-        a.grid(True, which="both", alpha=0.3)
-        a.legend(fontsize=8)
+        common.curve(ax, [r["size"] for r in rs], [r[f"{key}_s"] for r in rs], [f"RMSE {r[f'{key}_rmse_rel']:.4f}" for r in rs],
+                     color=colour, label=label, offset=(4, -10 if key == "ours" else 6))
+        common.curve(ax2, [r[f"{key}_s"] for r in rs], [r[f"{key}_rmse_rel"] for r in rs], [f"{r['size']}³" for r in rs],
+                     color=colour, label=label)
+    common.log_axes(ax, "n (n³ voxels from 1.4·n views of n² pixels)", "reconstruction time (s), best of runs",
+                    "FDK time (labels: RMSE away from edges, fraction of μ)", xbase=2, legend=8)
+    common.log_axes(ax2, "time (s)", "RMSE away from edges / μ_skull (3-D Shepp–Logan)", "time vs error", ylog=False, legend=8)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return common.save(fig, path)
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = common.parser(__doc__, "64³ only, a smoke test")
     ap.add_argument("--sizes", type=int, nargs="+", choices=sorted(CASES), default=[128, 256, 512])
-    ap.add_argument("--quick", action="store_true", help="64³ only, a smoke test")
     ap.add_argument("--no-rtk", action="store_true", help="do not run RTK")
-    ap.add_argument("--json", type=Path, default=None, help="results (default out/bench_fdk.json)")
-    ap.add_argument("--plot", type=Path, default=None, help="PNG (default docs/bench_fdk.png; --quick: out/)")
-    args = ap.parse_args(argv)
+    ap.add_argument("--plot", type=Path, default=None, help="PNG (default docs/bench_fdk.png; --quick: out/bench_fdk_quick.png)")
+    args = common.outputs(ap.parse_args(argv), "bench_fdk")
     sizes = [64] if args.quick else args.sizes
-    args.json = args.json or ROOT / "out" / ("bench_fdk_quick.json" if args.quick else "bench_fdk.json")
-    args.plot = args.plot or (ROOT / "out" / "bench_fdk_quick.png" if args.quick else ROOT / "docs" / "bench_fdk.png")
-    reason = "disabled (--no-rtk)" if args.no_rtk else rtk_available()
+    args.plot = args.plot or (common.OUT / "bench_fdk_quick.png" if args.quick else common.DOCS / "bench_fdk.png")
+    reason = "disabled (--no-rtk)" if args.no_rtk else rtk_peer.rtk_available()
     ctx = xr.CLContext()
-    cpu = platform.processor() or "unknown"
-    say(f"command: {shlex.join([sys.executable, *sys.argv])}")
-    try:
-        with open("/proc/cpuinfo") as f:
-            cpu = next((line.split(":", 1)[1].strip() for line in f if line.startswith("model name")), cpu)
-    except OSError:
-        pass
-    machine = {"cpu": cpu, "nproc": os.cpu_count(), "opencl_device": str(ctx.info), "numpy": np.__version__,
-               "loadavg_start": os.getloadavg()}
-    say(f"machine: {cpu}, {os.cpu_count()} CPUs; OpenCL: {ctx.info}; RTK: {reason or 'itk-rtk, 2 threads'}")
-    say("load average at start: " + ", ".join(f"{x:.2f}" for x in machine["loadavg_start"]))
+    machine = common.machine_info(cl=ctx)
+    common.print_machine(machine, common.command_line())
+    say(f"RTK: {reason or 'itk-rtk, 2 threads'}")
     records = []
     start = time.perf_counter()
     for n in sizes:
-        records.append(run_case(n, ctx, reason is None, ROOT / "out" / "bench_fdk_cache"))
-        br.write_json(args.json, {"machine": machine, "records": records})
+        records.append(run_case(n, ctx, reason is None, common.OUT / "bench_fdk_cache"))
+        common.write_json(args.json, {"machine": machine, "records": records})
     say("\n  size  views │ ours s   G upd/s  RMSE     │ RTK s    G upd/s  RMSE     │ RTK/ours")
     for r in records:
         rtk = (f"{r['rtk_s']:>8.3f} {r['updates'] / r['rtk_s'] / 1e9:>8.2f} {r['rtk_rmse_rel']:>8.5f} │ {r['ratio']:>7.2f}×"
@@ -225,12 +174,11 @@ def main(argv=None) -> int:
         say(f"  {r['size']:>4}³ {r['views']:>5} │ {r['ours_s']:>7.3f} {r['updates'] / r['ours_s'] / 1e9:>8.2f} "
             f"{r['ours_rmse_rel']:>8.5f} │ {rtk}")
     png = plot(records, args.plot)
-    machine["loadavg_end"] = os.getloadavg()
-    br.write_json(args.json, {"machine": machine, "records": records, "total_s": time.perf_counter() - start})
-    say(f"load average at end: {', '.join(f'{x:.2f}' for x in machine['loadavg_end'])}; results {args.json}"
-        + (f"; plot {png}" if png else ""))
+    line = common.finish(machine)
+    common.write_json(args.json, {"machine": machine, "records": records, "total_s": time.perf_counter() - start})
+    say(f"{line}; results {args.json}" + (f"; plot {png}" if png else ""))
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

@@ -1,11 +1,13 @@
-#!/usr/bin/env python3
 """Physics benchmark: the spectral sum, and the whole radiograph beside gVirtualXRay's.
+
+    python -m scripts.bench_physics            # full run, ~4 min on 2 cores
+    python -m scripts.bench_physics --quick    # smoke test, < 60 s
 
 Part 1: spectral-sum sweep
 --------------------------
-``physics.expected_signal`` (noise-free Σ_b w_b·N_b·a(p)·exp(−Σ_c μ_cb·L_c(p))), the whole
+``beer_lambert.expected_signal`` (noise-free Σ_b w_b·N_b·a(p)·exp(−Σ_c μ_cb·L_c(p))), the whole
 physics step ``radiograph(...)`` (bin trimming, attenuation table, spectral sum, flat
-normalisation; output "transmission") and, separately, the noisy ``physics.sampled_signal``
+normalisation; output "transmission") and, separately, the noisy ``beer_lambert.sampled_signal``
 (integrating detector: one Poisson draw per bin and pixel), on synthetic path lengths: float32
 ``(channels, n, n)``, each channel uniform in a realistic range (0–8 mm carbon fibre, 0–3 mm
 glass, 0–10 mm epoxy, 0–4 mm aluminium). Spectrum: SpekPy 80 kVp W, 2 mm Al, 0.25 keV bins,
@@ -18,47 +20,36 @@ per-configuration budget are skipped and listed.
 
 Part 2: whole radiograph vs gVirtualXRay
 ----------------------------------------
-The 3-material weave of ``bench_render.build_scene`` (level 60: 1,117,440 triangles), materials
+The 3-material weave of ``scripts.weave_scene.build_scene`` (level 60: 1,117,440 triangles), materials
 real: warp = carbon fibre (C, 1.80 g/cm³), weft = E-glass fibre (2.55 g/cm³), binder = epoxy
 (DGEBA, C21H24O4, 1.16 g/cm³); spectrum SpekPy 40 kVp W, 2 mm Al, 0.5 keV bins; detector without
 scintillator (η = 1, energy-integrating), same cone-beam geometry and views as bench_render.
 Ours: ``Renderer.project(scene, spectrum, view, output="transmission")`` (render + physics), and
 separately with ``noise=True``. gVirtualXRay: ``computeXRayImage`` (energy fluence, MeV) ÷ its
-flat (``gvxr_peer.gvxr_xray_image``), with its default bin cut-off and with every bin.
+flat (``scripts.peers.gvxr_peer.gvxr_xray_image``), with its default bin cut-off and with every bin.
 Error of both: relative to a float64 transmission on 2000 seeded pixels per view from the exact
-polyhedral chords of the same meshes (bench_render.References, kind "exact") × μ from our
+polyhedral chords of the same meshes (weave_scene.References, kind "exact") × μ from our
 Material (xraylib CS_Total), every non-empty bin, no trimming.
 
-Usage::
-
-    python scripts/bench_physics.py            # full run, ~4 min on 2 cores
-    python scripts/bench_physics.py --quick    # smoke test, < 60 s
+Writes out/bench_physics.json and docs/bench_physics_spectral_sum.png,
+docs/bench_physics_radiograph.png (``--quick``: out/, names ending in _quick).
 """
 
 from __future__ import annotations
 
-import argparse
 import math
-import os
-import shlex
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "scripts"))
-
-import xrayraster as xr  # noqa: E402
-from xrayraster import physics  # noqa: E402
-from xrayraster.physics.radiograph import BIN_TOLERANCE, radiograph  # noqa: E402
-
-import bench_render as br  # noqa: E402
-from gvxr_peer import gvxr_available, gvxr_linear_attenuation, gvxr_set_materials, gvxr_xray_image  # noqa: E402
-
-say = br.say
+import xrayraster as xr
+from scripts import common
+from scripts import weave_scene as weave
+from scripts.common import best_of, say
+from scripts.peers import gvxr_peer
+from xrayraster.physics import beer_lambert
+from xrayraster.physics.radiograph import BIN_TOLERANCE, radiograph
 
 # -- part 1 materials and path-length ranges (mm), channel c uses the first c entries
 SWEEP_MATERIALS = [
@@ -73,18 +64,6 @@ SCENE_MATERIALS = {"warp": SWEEP_MATERIALS[0][0], "weft": SWEEP_MATERIALS[1][0],
 REF_PIXELS = 2000
 WORST = 50  # pixels per view where ours and gvxr differ most: checked against the exact reference too
 NOISE_S_PER_PX_BIN = 1e-8  # first guess for the noise skip rule (measured ~5e-9 s here), then measured
-
-
-def best_of(fn, repeats: int, budget_s: float):
-    """(best seconds, last result): up to ``repeats`` calls, fewer once ``budget_s`` is spent."""
-    best, out, start = math.inf, None, time.perf_counter()
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        out = fn()
-        best = min(best, time.perf_counter() - t0)
-        if time.perf_counter() - start > budget_s:
-            break
-    return best, out
 
 
 # ---------------------------------------------------------------------------------------------
@@ -139,13 +118,13 @@ def sweep(sizes, channels_list, bins_list, repeats, budget_s, noise_budget_s):
     records, skipped = [], []
     rate = {}  # last measured seconds per (pixel·bin) of sampled_signal, for the skip rule
     for n in sizes:
-        geom = br.geometry(n)
-        factor = physics.pixel_photon_factor(geom, 0)
+        geom = weave.geometry(n)
+        factor = beer_lambert.pixel_photon_factor(geom, 0)
         rng = np.random.default_rng([7, n])
         lengths_all = np.empty((len(SWEEP_MATERIALS), n, n), np.float32)
         for c, (_, top) in enumerate(SWEEP_MATERIALS):
             lengths_all[c] = rng.random((n, n), dtype=np.float32) * np.float32(top)
-        rc = br.sample_pixels(n, REF_PIXELS)
+        rc = weave.sample_pixels(n, REF_PIXELS)
         for channels in channels_list:
             lengths = lengths_all[:channels]
             mats = [m for m, _ in SWEEP_MATERIALS[:channels]]
@@ -159,7 +138,7 @@ def sweep(sizes, channels_list, bins_list, repeats, budget_s, noise_budget_s):
                 work = n * n * len(e)
                 rec = {"detector": n, "channels": channels, "bins": len(e)}
                 # expected_signal
-                t, sig = best_of(lambda: physics.expected_signal(lengths, mu, photons, w, factor), repeats, budget_s)
+                t, sig = best_of(lambda: beer_lambert.expected_signal(lengths, mu, photons, w, factor), repeats, budget_s)
                 trans = sig[rc[:, 0], rc[:, 1]] / (float((photons * w).sum()) * factor[rc[:, 0], rc[:, 1]])
                 rec["expected_signal_s"] = t
                 rec["expected_signal_max_rel_err"] = float(np.max(np.abs(trans - ref) / ref))
@@ -178,7 +157,7 @@ def sweep(sizes, channels_list, bins_list, repeats, budget_s, noise_budget_s):
                     skipped.append(f"sampled_signal {n}² {channels} ch {len(e)} bins (predicted {pred:.1f} s > {noise_budget_s:g} s)")
                 else:
                     gen = np.random.default_rng(1)
-                    t, _ = best_of(lambda: physics.sampled_signal(lengths, mu, photons, det.efficiency(e), e, factor, False, gen),
+                    t, _ = best_of(lambda: beer_lambert.sampled_signal(lengths, mu, photons, det.efficiency(e), e, factor, False, gen),
                                    repeats, budget_s)
                     if work >= 2**20:  # small calls are overhead-bound: they would mispredict
                         rate["noise"] = t / work
@@ -216,7 +195,7 @@ def rel_stats(values: np.ndarray, ref: np.ndarray) -> dict:
 
 def whole(level, sizes, max_views, repeats, with_gvxr, gvxr_reason, ctx):
     say(f"\n== Part 2: whole radiograph, weave scene level {level} vs gVirtualXRay ==")
-    bench = br.build_scene(level)
+    bench = weave.build_scene(level)
     scene = xr.Scene()
     for o in bench.scene.objects:
         scene.add(o.mesh, SCENE_MATERIALS[o.material], name=o.name)
@@ -236,15 +215,15 @@ def whole(level, sizes, max_views, repeats, with_gvxr, gvxr_reason, ctx):
                                   for k, m in SCENE_MATERIALS.items()))
     say(f"spectrum: {spectrum.description}; {spectrum.n_bins} bins, {int(nz.sum())} non-empty; ours keeps "
         f"{int(keep.sum())} (trimming drops {dropped:.2e} of the open-beam signal)")
-    say(f"detector: integrating, no scintillator (η = 1); views at {', '.join(f'{a:g}°' for a in br.ANGLES_DEG[:max_views])}; "
+    say(f"detector: integrating, no scintillator (η = 1); views at {', '.join(f'{a:g}°' for a in weave.ANGLES_DEG[:max_views])}; "
         f"best of {repeats}; error vs float64 exact-chord transmission, {REF_PIXELS} seeded pixels per view")
 
     info = {"level": level, "triangles": bench.triangles, "spectrum": spectrum.description, "bins": spectrum.n_bins,
             "bins_nonempty": int(nz.sum()), "ours_bins_kept": int(keep.sum()), "ours_dropped_share": dropped,
             "materials": {k: repr(m) for k, m in SCENE_MATERIALS.items()}}
     if with_gvxr:
-        labels = gvxr_set_materials(bench.gvxr_meshes, gvxr_materials())
-        mu_g = {m: gvxr_linear_attenuation(labels[m], e_ref) for m in names}
+        labels = gvxr_peer.gvxr_set_materials(bench.gvxr_meshes, gvxr_materials())
+        mu_g = {m: gvxr_peer.gvxr_linear_attenuation(labels[m], e_ref) for m in names}
         diff = {m: float(np.max(np.abs(mu_g[m] - mu_ref[i]) / mu_ref[i])) for i, m in enumerate(names)}
         info["gvxr_mu_max_rel_diff"] = diff
         say("gvxr μ (getLinearAttenuationCoefficient) vs ours (xraylib CS_Total), max relative difference over the bins: "
@@ -252,7 +231,7 @@ def whole(level, sizes, max_views, repeats, with_gvxr, gvxr_reason, ctx):
     else:
         say(f"gVirtualXRay: not run: {gvxr_reason}")
 
-    refs = br.References(REF_PIXELS)
+    refs = weave.References(REF_PIXELS)
     rows = []
     hdr = (f"{'det':>5} {'code':<24} {'views':>5} {'bins':>4} {'s/view':>8} │ {'max rel err':>11} {'p99.9':>8} {'mean':>8} "
            f"{'max |ΔT|':>9} │ {'vs ours: max|ΔT|/T':>18} {'mean|ΔT|':>9}")
@@ -260,7 +239,7 @@ def whole(level, sizes, max_views, repeats, with_gvxr, gvxr_reason, ctx):
     gv_jobs = []  # gvxr runs with default cut-off first (it cannot be restored once set), then all bins
     ours_images = {}
     for n in sizes:
-        geom = br.geometry(n)
+        geom = weave.geometry(n)
         rc = refs.pixels(n)
         renderer = xr.Renderer(geom, overlap="sum", context=ctx)
         try:
@@ -288,8 +267,8 @@ def whole(level, sizes, max_views, repeats, with_gvxr, gvxr_reason, ctx):
                 rc = refs.pixels(n)
                 items, full = [], []
                 for view in range(max_views):
-                    g = gvxr_xray_image(bench.gvxr_meshes, gvxr_materials(), e_all, n_all, br.SOD, br.SDD, (n, n),
-                                        br.DET_WIDTH / n, math.radians(br.ANGLES_DEG[view]), repeats=repeats,
+                    g = gvxr_peer.gvxr_xray_image(bench.gvxr_meshes, gvxr_materials(), e_all, n_all, weave.SOD, weave.SDD, (n, n),
+                                        weave.DET_WIDTH / n, math.radians(weave.ANGLES_DEG[view]), repeats=repeats,
                                         bin_cutoff_kev=cutoff)
                     L = refs.get(bench, "exact", n, view, 1)
                     ref = reference_transmission(np.stack([L[m] for m in names]), mu_ref, n_ref, w_ref)
@@ -301,8 +280,7 @@ def whole(level, sizes, max_views, repeats, with_gvxr, gvxr_reason, ctx):
                     diff = np.abs(ours - tg)
                     worst = np.argsort(diff, axis=None)[-WORST:]
                     wrc = np.column_stack(np.unravel_index(worst, diff.shape))
-                    wrefs = br.References(WORST)
-                    wrefs._cache[("pixels", n)] = wrc  # same machinery, these pixels
+                    wrefs = weave.References(WORST, pixels={n: wrc})  # same machinery, these pixels
                     wl = wrefs.get(bench, "exact", n, view, 1)
                     wref = reference_transmission(np.stack([wl[m] for m in names]), mu_ref, n_ref, w_ref)
                     full.append({"worst_pixels_ours_max_rel": float(np.max(np.abs(ours[wrc[:, 0], wrc[:, 1]] - wref) / wref)),
@@ -337,7 +315,7 @@ def summarise(n, code, items):
     times = [t for t, *_ in items]
     values = np.concatenate([v for _, v, _, _ in items])
     ref = np.concatenate([r for _, _, r, _ in items])
-    return {"detector": n, "code": code, "views_deg": list(br.ANGLES_DEG[: len(items)]), "best_s_per_view": times,
+    return {"detector": n, "code": code, "views_deg": list(weave.ANGLES_DEG[: len(items)]), "best_s_per_view": times,
             "s_per_view": float(np.mean(times)), "bins": items[0][3], "error_rel": rel_stats(values, ref)}
 
 
@@ -376,15 +354,9 @@ def ratios(rows):
 
 
 def plot(sweep_records, rows, plots_dir: Path, suffix: str) -> list[Path]:
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError as exc:
-        say(f"plots skipped: matplotlib unavailable ({exc})")
+    plt = common.pyplot()
+    if plt is None:
         return []
-    plots_dir.mkdir(parents=True, exist_ok=True)
     out = []
     sizes = sorted({r["detector"] for r in sweep_records})
     if sizes:
@@ -405,22 +377,14 @@ def plot(sweep_records, rows, plots_dir: Path, suffix: str) -> list[Path]:
                 for r in rs:  # error printed beside the time
                     ax.annotate(f"{r['radiograph_max_rel_err']:.0e}", (r["bins"], r["radiograph_s"]), textcoords="offset points",
                                 xytext=(3, -9), fontsize=6, color=c)
-            for a in (ax, ax2):
-                a.set_xscale("log")
-                a.set_yscale("log")
-                a.set_xlabel("energy bins B")
-                a.grid(True, which="both", alpha=0.3)
-            ax.set_ylabel("time (s), best of ≤ 3")
-            ax.set_title(f"{n}² detector: time (labels: radiograph() max rel. error)", fontsize=9)
-            ax2.set_ylabel("max relative transmission error vs float64")
-            ax2.set_title(f"{n}² detector: error", fontsize=9)
+            common.log_axes(ax, "energy bins B", "time (s), best of ≤ 3",
+                            f"{n}² detector: time (labels: radiograph() max rel. error)", legend=None)
+            common.log_axes(ax2, "energy bins B", "max relative transmission error vs float64", f"{n}² detector: error",
+                            legend=None)
         axes[0, 0].legend(fontsize=6, ncol=1)
         fig.suptitle("spectral sum: time vs energy bins (synthetic path lengths; 80 kVp W, 2 mm Al regrouped; η = 1)", fontsize=10)
         fig.tight_layout()
-        path = plots_dir / f"bench_physics_spectral_sum{suffix}.png"
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-        out.append(path)
+        out.append(common.save(fig, plots_dir / f"bench_physics_spectral_sum{suffix}.png"))
     if rows:
         style = {"ours": ("C0", "o"), "ours+noise": ("C2", "D"), "gvxr default cut-off": ("C3", "^"), "gvxr all bins": ("C1", "v")}
         fig, axes = plt.subplots(1, 2, figsize=(12, 4.8))
@@ -432,9 +396,8 @@ def plot(sweep_records, rows, plots_dir: Path, suffix: str) -> list[Path]:
             if code != "ours+noise":
                 for ax, stat in zip(axes, ("max", "p99.9")):
                     y = [max(r["error_rel"][stat], 1e-9) for r in rs]
-                    ax.plot(x, y, marker=mk, color=c, label=f"{code} ({rs[0]['bins']} bins)")
-                    for r, xi, yi in zip(rs, x, y):
-                        ax.annotate(f"{r['detector']}²", (xi, yi), textcoords="offset points", xytext=(4, 4), fontsize=7, color=c)
+                    common.curve(ax, x, y, [f"{r['detector']}²" for r in rs], color=c, marker=mk,
+                                 label=f"{code} ({rs[0]['bins']} bins)")
             else:
                 for ax in axes:
                     for r in rs:
@@ -442,19 +405,11 @@ def plot(sweep_records, rows, plots_dir: Path, suffix: str) -> list[Path]:
                         ax.annotate(f"ours+noise {r['detector']}²", (r["s_per_view"], 0.5), xycoords=("data", "axes fraction"),
                                     rotation=90, fontsize=6, color=c)
         for ax, stat in zip(axes, ("max", "p99.9")):
-            ax.set_xscale("log")
-            ax.set_yscale("log")
-            ax.set_xlabel("time per view (s): render + physics")
-            ax.set_ylabel(f"{stat} relative transmission error vs float64 exact chords")
-            ax.grid(True, which="both", alpha=0.3)
-            ax.legend(fontsize=7)
+            common.log_axes(ax, "time per view (s): render + physics", f"{stat} relative transmission error vs float64 exact chords")
         fig.suptitle("whole polychromatic radiograph, 1.1 M-triangle 3-material weave, 40 kVp W + 2 mm Al, η = 1: "
                      "xrayraster vs gVirtualXRay", fontsize=9)
         fig.tight_layout()
-        path = plots_dir / f"bench_physics_radiograph{suffix}.png"
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-        out.append(path)
+        out.append(common.save(fig, plots_dir / f"bench_physics_radiograph{suffix}.png"))
     return out
 
 
@@ -462,16 +417,11 @@ def plot(sweep_records, rows, plots_dir: Path, suffix: str) -> list[Path]:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--quick", action="store_true", help="small sizes only: a smoke test that finishes in < 60 s")
+    ap = common.parser(__doc__, "small sizes only: a smoke test that finishes in < 60 s", plots=True)
     ap.add_argument("--no-gvxr", action="store_true", help="do not run gVirtualXRay")
     ap.add_argument("--skip-sweep", action="store_true", help="part 2 only")
     ap.add_argument("--skip-radiograph", action="store_true", help="part 1 only")
-    ap.add_argument("--json", type=Path, help="results (default out/bench_physics.json; --quick: out/bench_physics_quick.json)")
-    ap.add_argument("--plots-dir", type=Path, help="PNG plots (default docs/; --quick: out/)")
-    args = ap.parse_args(argv)
-    args.json = args.json or ROOT / "out" / ("bench_physics_quick.json" if args.quick else "bench_physics.json")
-    args.plots_dir = args.plots_dir or (ROOT / "out" if args.quick else ROOT / "docs")
+    args = common.outputs(ap.parse_args(argv), "bench_physics")
 
     if args.quick:
         sizes, channels, bins, repeats, budget, noise_budget = [128, 256], [1, 3], [1, 10, 80], 2, 1.0, 1.0
@@ -481,29 +431,24 @@ def main(argv=None) -> int:
         level, rsizes, views = 60, [512, 1024], 3
 
     t_start = time.perf_counter()
-    command = shlex.join([sys.executable, *sys.argv])
+    command = common.command_line()
     ctx = xr.GLContext()
-    machine = br.machine_info(ctx)
-    say(f"command: {command}")
-    say(f"machine: {machine['cpu']}, {machine['nproc']} CPUs; GL: {machine['gl_renderer']} ({machine['gl_version']}, {machine['gl_backend']})")
-    say(f"python {machine['python']}, numpy {machine['numpy']}, gvxr {machine['gvxr']}")
-    machine["loadavg_start"] = os.getloadavg()
-    say("load average at start (1/5/15 min): " + ", ".join(f"{x:.2f}" for x in machine["loadavg_start"])
-        + " (times are only comparable on an otherwise idle machine)")
+    machine = common.machine_info(gl=ctx)
+    common.print_machine(machine, command)
     payload = {"command": command, "machine": machine, "settings": {
         "sweep_sizes": sizes, "sweep_channels": channels, "sweep_bins": bins, "repeats": repeats,
         "budget_s": budget, "noise_budget_s": noise_budget, "ref_pixels": REF_PIXELS, "level": level,
-        "radiograph_sizes": rsizes, "views": views, "sod_mm": br.SOD, "sdd_mm": br.SDD, "detector_width_mm": br.DET_WIDTH}}
+        "radiograph_sizes": rsizes, "views": views, "sod_mm": weave.SOD, "sdd_mm": weave.SDD, "detector_width_mm": weave.DET_WIDTH}}
 
     if not args.skip_sweep:
         recs, skipped, desc = sweep(sizes, channels, bins, repeats, budget, noise_budget)
         payload["sweep"] = {"spectrum": desc, "records": recs, "skipped": skipped}
-        br.write_json(args.json, payload)
+        common.write_json(args.json, payload)
         say(f"part 1: {time.perf_counter() - t_start:.1f} s so far")
 
     rows = []
     if not args.skip_radiograph:
-        reason = "disabled (--no-gvxr)" if args.no_gvxr else gvxr_available()
+        reason = "disabled (--no-gvxr)" if args.no_gvxr else gvxr_peer.gvxr_available()
         rows, info = whole(level, rsizes, views, repeats, reason is None, reason, ctx)
         payload["radiograph"] = {"info": info, "rows": rows, "gvxr_reason": reason}
         comp = ratios(rows)
@@ -522,18 +467,18 @@ def main(argv=None) -> int:
                 say(f"  overall (1024², {info['triangles']:,} triangles, both gvxr settings): {'MET' if payload['target_met'] else 'NOT MET'}")
         say("note: gvxr's μ comes from its own tables (compare the μ line above); its error includes any data "
             "difference, ours uses the same xraylib μ as the reference.")
-        br.write_json(args.json, payload)
+        common.write_json(args.json, payload)
 
     for path in plot(payload.get("sweep", {}).get("records", []), rows, args.plots_dir, "_quick" if args.quick else ""):
         say(f"plot: {path}")
     payload["total_s"] = time.perf_counter() - t_start
-    payload["loadavg_end"] = os.getloadavg()
-    say("load average at end (1/5/15 min): " + ", ".join(f"{x:.2f}" for x in payload["loadavg_end"]))
-    br.write_json(args.json, payload)
+    say(common.finish(machine))
+    payload["loadavg_end"] = machine["loadavg_end"]
+    common.write_json(args.json, payload)
     say(f"results: {args.json}")
     say(f"total {payload['total_s']:.1f} s")
     return 0  # ctx deliberately not released (see bench_render.main)
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

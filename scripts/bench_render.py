@@ -1,29 +1,25 @@
-#!/usr/bin/env python3
 """Renderer benchmark: time per view against path-length error, xrayraster beside gVirtualXRay.
+
+    python -m scripts.bench_render            # full run: ~10 min on 2 CPU cores (llvmpipe)
+    python -m scripts.bench_render --quick    # smoke test, < 1 min
 
 The scene
 ---------
-A 3-D orthogonal "weave" of straight closed tubes in three materials, ~12 mm across:
-warp tubes along x and weft tubes along y in alternating layers, and thin binder tubes along z
-threading the gaps between them. No two objects touch (their bounding boxes are disjoint,
-checked), so the single-pass ``overlap='sum'`` path is exact for it. The *matrix* scene adds a
-fourth object, a matrix box enclosing all yarns at lower priority (the composite case). It is
-rendered twice: ``overlap='nested'`` (what ``auto`` picks: the single pass, each yarn also
-taking its length off the matrix) and forced ``overlap='resolve'`` (per-pixel crossing lists +
-priority sweep, the general path for partial overlaps). gVirtualXRay has no priorities, so
-only xrayraster is measured on that scene.
-
-One tessellation level ``N`` (sections around a warp/weft tube) sets every mesh: binder tubes
-get proportionally fewer sections (half the radius, same edge length) and all tubes are cut
-along their length into near-square quads, as a yarn mesh would be. N = 6 / 18 / 60 gives
-~12 k / ~100 k / ~1.1 M triangles.
+The 3-material weave of :mod:`scripts.weave_scene` (straight closed tubes: warp along x, weft
+along y, binders along z; no two touch, so ``overlap='sum'`` is exact), at tessellation levels
+N = 6 / 18 / 60 (~12 k / ~100 k / ~1.1 M triangles). The *matrix* scene adds a matrix box
+enclosing all yarns at lower priority (the composite case). It is rendered twice:
+``overlap='nested'`` (what ``auto`` picks: the single pass, each yarn also taking its length
+off the matrix) and forced ``overlap='resolve'`` (per-pixel crossing lists + priority sweep, the
+general path for partial overlaps). gVirtualXRay has no priorities, so only xrayraster is
+measured on that scene.
 
 What is timed
 -------------
 ``Renderer.path_lengths(scene, view)`` on one shared GLContext: one untimed warm-up call (scene
 upload, shader compilation, list-pool sizing), then the best of ``repeats`` calls for each of a
 few views at different angles; s/view is the mean of the per-view bests. gVirtualXRay is driven
-through ``scripts/gvxr_peer.py`` on the very same vertex/face arrays (mm, same frame), the same
+through ``scripts/peers/gvxr_peer.py`` on the very same vertex/face arrays (mm, same frame), the same
 source/detector geometry and the same angles; its time is also best-of-repeats per view and
 includes reading every material's L-buffer back into a numpy array, as ours does.
 
@@ -39,25 +35,14 @@ Errors (all in mm, on a fixed seeded sample of detector pixels, pooled over view
   detector pixel integrates. Supersampling trades time for this one.
 For the matrix scene the matrix reference is the box chord minus the yarn chords.
 
-Usage::
-
-    python scripts/bench_render.py            # full run: ~10 min on 2 CPU cores (llvmpipe)
-    python scripts/bench_render.py --quick    # smoke test, < 1 min
-
-Prints a table as it goes, writes every number to a JSON file (``--json``) and plots
-time-versus-error figures (``--plots-dir``, PNG via matplotlib when installed).
+Prints a table as it goes, writes every number to a JSON file (``--json``; default
+out/bench_render.json) and plots time-versus-error figures (``--plots-dir``; default docs/,
+``--quick``: out/) as PNG via matplotlib when installed.
 """
 
 from __future__ import annotations
 
-import argparse
-import json
 import math
-import os
-import platform
-import shlex
-import sys
-import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -66,279 +51,13 @@ import moderngl
 import numpy as np
 import trimesh
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))  # run from a checkout without installing the package
-sys.path.insert(0, str(ROOT / "scripts"))
+import xrayraster as xr
+from scripts import common
+from scripts.common import say
+from scripts.peers import gvxr_peer
+from scripts.weave_scene import ANGLES_DEG, DET_WIDTH, SDD, SOD, YARNS, BenchScene, References, build_scene, geometry
 
-import xrayraster as xr  # noqa: E402
-from gvxr_peer import gvxr_available, gvxr_path_lengths  # noqa: E402
-
-# -- geometry: cone beam, magnification 2.5; the scene (≤ 8.9 mm from the axis) fills ~80–90 % of
-#    a 48 mm detector at every angle. Pixel size = DET_WIDTH / n, so all detector sizes see the
-#    same field of view and only the sampling changes.
-SOD, SDD, DET_WIDTH = 40.0, 100.0, 48.0
-ANGLES_DEG = (10.0, 37.0, 71.0)  # off the axes: no ray family is exactly parallel to a tube
-
-# -- scene layout (mm)
-YARNS = ("warp", "weft", "binder")
-MATRIX = "matrix"
-R_YARN, R_BINDER, LENGTH = 0.6, 0.3, 12.0
-BOX_HALF = 6.25  # matrix box: encloses the yarns (which end at ±6) without sharing a face plane
 PIXEL_SUBGRID = 16  # S×S sub-rays per pixel for the 'pixel' reference
-
-
-def say(*args) -> None:
-    print(*args, flush=True)
-
-
-# ---------------------------------------------------------------------------------------------
-# Scene
-# ---------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class Tube:
-    """A straight closed tube along one axis: the ideal shape and its tessellation."""
-
-    material: str
-    centre: tuple[float, float, float]
-    axis: int  # 0 = x, 1 = y, 2 = z
-    radius: float
-
-    @property
-    def bbox(self) -> np.ndarray:
-        """(2, 3) box holding the smooth tube and hence its inscribed tessellation."""
-        half = np.full(3, self.radius)
-        half[self.axis] = LENGTH / 2
-        return np.stack([np.subtract(self.centre, half), np.add(self.centre, half)])
-
-    def sections(self, level: int) -> int:
-        # Thinner tubes get fewer sections, so every triangle has about the same size.
-        return max(4, round(level * self.radius / R_YARN))
-
-    def mesh(self, level: int) -> tuple[np.ndarray, np.ndarray]:
-        """Closed convex prism: vertices on the cylinder, near-square quads along the length."""
-        n = self.sections(level)
-        m = max(1, round(LENGTH * n / (2 * math.pi * self.radius)))
-        z = np.linspace(-LENGTH / 2, LENGTH / 2, m + 1)
-        profile = np.vstack([[0, -LENGTH / 2], np.column_stack([np.full(m + 1, self.radius), z]), [0, LENGTH / 2]])
-        local = trimesh.creation.revolve(profile, sections=n)  # about local z
-        v = np.empty_like(local.vertices)
-        a = self.axis  # cyclic permutation of the axes = a proper rotation (keeps the winding)
-        v[:, (a + 1) % 3], v[:, (a + 2) % 3], v[:, a] = local.vertices.T
-        return v + self.centre, np.asarray(local.faces)
-
-    def smooth_chord(self, src: np.ndarray, dirs: np.ndarray) -> np.ndarray:
-        """Chord of the ideal capped cylinder along unit rays from ``src``, float64."""
-        a = self.axis
-        p, q = (a + 1) % 3, (a + 2) % 3
-        o = src - np.asarray(self.centre)
-        dx, dy, dz = dirs[:, p], dirs[:, q], dirs[:, a]
-        qa = dx * dx + dy * dy
-        qb = o[p] * dx + o[q] * dy
-        qc = o[p] ** 2 + o[q] ** 2 - self.radius**2
-        with np.errstate(divide="ignore", invalid="ignore"):
-            disc = qb * qb - qa * qc
-            root = np.sqrt(np.maximum(disc, 0.0))
-            lo = np.where(qa > 0, (-qb - root) / qa, np.where(qc <= 0, -np.inf, np.inf))
-            hi = np.where(qa > 0, (-qb + root) / qa, np.where(qc <= 0, np.inf, -np.inf))
-            lo = np.where((qa > 0) & (disc <= 0), np.inf, lo)
-            t1 = (-LENGTH / 2 - o[a]) / dz
-            t2 = (LENGTH / 2 - o[a]) / dz
-        inside = abs(o[a]) <= LENGTH / 2
-        zlo = np.where(dz == 0, -np.inf if inside else np.inf, np.minimum(t1, t2))
-        zhi = np.where(dz == 0, np.inf if inside else -np.inf, np.maximum(t1, t2))
-        enter = np.maximum(np.maximum(lo, zlo), 0.0)
-        return np.maximum(np.minimum(hi, zhi) - enter, 0.0)
-
-
-def yarn_layout() -> list[Tube]:
-    """Warp (x) and weft (y) layers alternating in z, binders (z) through the gaps.
-
-    Binders sit half a pitch away from every warp/weft axis (1 mm > 0.6 + 0.3 mm), and warp and
-    weft layers are 2 mm apart (> 2 × 0.6 mm), so nothing overlaps.
-    """
-    odd = (-5.0, -3.0, -1.0, 1.0, 3.0, 5.0)
-    even = (-4.0, -2.0, 0.0, 2.0, 4.0)
-    tubes = [Tube("warp", (0.0, y, z), 0, R_YARN) for z in (-5.0, -1.0, 3.0) for y in odd]
-    tubes += [Tube("weft", (x, 0.0, z), 1, R_YARN) for z in (-3.0, 1.0, 5.0) for x in odd]
-    tubes += [Tube("binder", (x, y, 0.0), 2, R_BINDER) for x in even for y in even]
-    return tubes
-
-
-def face_planes(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Distinct face planes (unit normal n, offset h; inside is n·x ≤ h) of a closed convex mesh.
-
-    Coplanar faces (two per side quad, a fan per cap) give the same plane up to rounding, so one
-    representative each turns a 20 k-face tube into ~60 planes: the same polyhedron (to ~1e-15 mm)
-    at a cost that does not grow with the length subdivision.
-    """
-    a, b, c = (np.asarray(vertices, np.float64)[faces[:, i]] for i in range(3))
-    n = np.cross(b - a, c - a)
-    n /= np.linalg.norm(n, axis=1, keepdims=True)
-    h = np.einsum("ij,ij->i", n, a)
-    key = np.round(np.column_stack([n, h / (1.0 + np.abs(h).max())]) * 1e9)
-    _, first = np.unique(key, axis=0, return_index=True)
-    return n[first], h[first]
-
-
-def convex_chord(src: np.ndarray, dirs: np.ndarray, normals: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-    """Exact float64 chord of unit rays from ``src`` through the polyhedron ∩{n·x ≤ h}."""
-    out = np.empty(len(dirs))
-    dist = offsets - normals @ src  # ≥ 0 where the source is inside the half-space
-    step = max(1, 4_000_000 // max(1, len(normals)))  # bound the (rays × planes) temporaries
-    for s in range(0, len(dirs), step):
-        nd = dirs[s : s + step] @ normals.T
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = dist / nd
-        enter = np.maximum(np.where(nd < 0, t, -np.inf).max(axis=1), 0.0)
-        leave = np.where(nd > 0, t, np.inf).min(axis=1)
-        chord = np.maximum(leave - enter, 0.0)
-        chord[((nd == 0) & (dist < 0)).any(axis=1)] = 0.0  # parallel to a face, outside it
-        out[s : s + step] = chord
-    return out
-
-
-@dataclass
-class Solid:
-    """One scene object as the references see it."""
-
-    material: str
-    bbox: np.ndarray
-    planes: tuple[np.ndarray, np.ndarray]  # of the mesh actually rendered
-    smooth: object  # callable (src, dirs) -> chord of the ideal shape
-
-    def chord(self, kind: str, src, dirs) -> np.ndarray:
-        if kind == "exact":
-            return convex_chord(src, dirs, *self.planes)
-        return self.smooth(src, dirs)
-
-
-@dataclass
-class BenchScene:
-    level: int
-    scene: xr.Scene  # yarns only: single pass
-    resolve_scene: xr.Scene  # the matrix scene: yarns + lower-priority matrix box
-    solids: list[Solid]  # yarns, then the box
-    gvxr_meshes: dict[str, list]  # material -> [(vertices, faces)], the very arrays we render
-    triangles: int
-    build_s: float
-    per_material: dict[str, int] = field(default_factory=dict)
-
-
-def build_scene(level: int) -> BenchScene:
-    t0 = time.perf_counter()
-    tubes = yarn_layout()
-    boxes = np.stack([t.bbox for t in tubes])
-    for i in range(len(boxes)):  # disjoint boxes ⇒ disjoint objects ⇒ 'sum' is exact
-        lo, hi = boxes[i]
-        apart = np.any((boxes[:, 1] <= lo) | (boxes[:, 0] >= hi), axis=1)
-        apart[i] = True
-        assert apart.all(), f"tube {i} overlaps another: fix yarn_layout()"
-    scene, resolve_scene = xr.Scene(), xr.Scene()
-    solids, meshes = [], {m: [] for m in YARNS}
-    for i, tube in enumerate(tubes):
-        obj = scene.add(tube.mesh(level), tube.material, name=f"{tube.material}{i}")
-        resolve_scene.add(obj.mesh, tube.material, name=obj.name)  # same checked Mesh, not copied
-        solids.append(Solid(tube.material, tube.bbox, face_planes(obj.mesh.vertices, obj.mesh.faces), tube.smooth_chord))
-        meshes[tube.material].append((obj.mesh.vertices, obj.mesh.faces))
-    box = resolve_scene.add(trimesh.creation.box(extents=(2 * BOX_HALF,) * 3), MATRIX, name="matrix", priority=-1)
-    planes = face_planes(box.mesh.vertices, box.mesh.faces)
-    solids.append(Solid(MATRIX, np.array([[-BOX_HALF] * 3, [BOX_HALF] * 3]), planes, lambda s, d: convex_chord(s, d, *planes)))
-    per = {m: sum(len(f) for _, f in meshes[m]) for m in YARNS}
-    return BenchScene(level, scene, resolve_scene, solids, meshes, scene.num_triangles, time.perf_counter() - t0, per)
-
-
-# ---------------------------------------------------------------------------------------------
-# Rays and references (straight from the documented convention in xrayraster/core/geometry.py, not
-# from the renderer's ray set-up, so a frame or offset bug in the renderer shows as an error)
-# ---------------------------------------------------------------------------------------------
-
-
-def rot_z(theta: float) -> np.ndarray:
-    c, s = math.cos(theta), math.sin(theta)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def geometry(n: int, angles=None) -> xr.ConeBeamGeometry:
-    angles = [math.radians(a) for a in ANGLES_DEG] if angles is None else angles
-    return xr.ConeBeamGeometry(SOD, SDD, (n, n), DET_WIDTH / n, angles)
-
-
-def sub_offsets(k: int) -> np.ndarray:
-    """(k², 2) (row, col) offsets in pixels of the centres of a regular k×k sub-grid."""
-    f = (np.arange(k) + 0.5) / k - 0.5
-    return np.stack(np.meshgrid(f, f, indexing="ij"), axis=-1).reshape(-1, 2)
-
-
-def rays(theta: float, n: int, rc: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Source and (m, q, 3) unit directions to sub-pixel points (rc: (m, 2) pixel rows/cols)."""
-    r = rot_z(theta)
-    pixel = DET_WIDTH / n
-    row = rc[:, 0, None] + offsets[None, :, 0] - (n - 1) / 2
-    col = rc[:, 1, None] + offsets[None, :, 1] - (n - 1) / 2
-    local = np.stack(np.broadcast_arrays(col * pixel, SDD - SOD, row * pixel), axis=-1)
-    src = r @ np.array([0.0, -SOD, 0.0])
-    d = local @ r.T - src
-    return src, d / np.linalg.norm(d, axis=-1, keepdims=True)
-
-
-def projected_box(theta: float, n: int, bbox: np.ndarray) -> np.ndarray:
-    """(row_lo, row_hi, col_lo, col_hi) fractional pixel indices of a box's shadow."""
-    corners = np.array(np.meshgrid(*bbox.T, indexing="ij")).reshape(3, -1).T
-    local = corners @ rot_z(theta)  # = R_z(−θ)·p: the frame where the source is at −y
-    t = SDD / (local[:, 1] + SOD) / (DET_WIDTH / n)
-    row, col = local[:, 2] * t + (n - 1) / 2, local[:, 0] * t + (n - 1) / 2
-    return np.array([row.min(), row.max(), col.min(), col.max()])
-
-
-def sample_pixels(n: int, count: int, seed: int = 12345) -> np.ndarray:
-    """A fixed (seeded per detector size) random subset of pixels, (m, 2) rows/cols."""
-    rng = np.random.default_rng([seed, n])
-    flat = np.sort(rng.choice(n * n, size=min(count, n * n), replace=False))
-    return np.column_stack(np.divmod(flat, n))
-
-
-class References:
-    """Per-material reference path lengths on the sampled pixels, cached (they are reused
-    across methods, and 'smooth'/'pixel' across tessellation levels)."""
-
-    def __init__(self, pixels_per_view: int):
-        self.count = pixels_per_view
-        self._cache: dict = {}
-        self.seconds = 0.0
-
-    def pixels(self, n: int) -> np.ndarray:
-        key = ("pixels", n)
-        if key not in self._cache:
-            self._cache[key] = sample_pixels(n, self.count)
-        return self._cache[key]
-
-    def get(self, bench: BenchScene, kind: str, n: int, view: int, k: int) -> dict[str, np.ndarray]:
-        """{material: (m,) mm}: mean over the k×k sub-rays of each sampled pixel of the chords
-        of the polyhedral meshes (kind 'exact') or of the smooth shapes ('smooth'); the
-        matrix entry is the box chord minus all yarn chords (it has the lowest priority)."""
-        key = (kind, bench.level if kind == "exact" else None, n, view, k)
-        if key in self._cache:
-            return self._cache[key]
-        t0 = time.perf_counter()
-        theta = math.radians(ANGLES_DEG[view])
-        rc = self.pixels(n)
-        offsets = sub_offsets(k)
-        out = {m: np.zeros(len(rc)) for m in (*YARNS, MATRIX)}
-        for solid in bench.solids:
-            r0, r1, c0, c1 = projected_box(theta, n, solid.bbox)
-            # ±1 pixel: sub-rays reach half a pixel beyond the sampled pixel's centre.
-            hit = (rc[:, 0] >= r0 - 1) & (rc[:, 0] <= r1 + 1) & (rc[:, 1] >= c0 - 1) & (rc[:, 1] <= c1 + 1)
-            if not hit.any():
-                continue
-            src, d = rays(theta, n, rc[hit], offsets)
-            chord = solid.chord(kind, src, d.reshape(-1, 3)).reshape(d.shape[:2]).mean(axis=1)
-            out[solid.material][hit] += chord
-        out[MATRIX] -= sum(out[m] for m in YARNS)  # box minus the yarns it holds
-        self._cache[key] = out
-        self.seconds += time.perf_counter() - t0
-        return out
 
 
 # ---------------------------------------------------------------------------------------------
@@ -393,16 +112,11 @@ def time_ours(ctx, bench: BenchScene, method: str, n: int, k: int, repeats: int,
         assert renderer.last_method == method, renderer.last_method
         start = time.perf_counter()
         for view in range(max_views):
-            best = math.inf
-            for _ in range(repeats):
-                t0 = time.perf_counter()
-                out = renderer.path_lengths(scene, view)
-                best = min(best, time.perf_counter() - t0)
+            best, out = common.best_of(lambda: renderer.path_lengths(scene, view), repeats)
             meas.views.append(view)
             meas.best_s.append(best)
             meas.samples.append({m: out[i, rc[:, 0], rc[:, 1]].astype(np.float64) for i, m in enumerate(scene.materials)})
-            spent = time.perf_counter() - start
-            if spent * (len(meas.views) + 1) / len(meas.views) > budget_s:
+            if not common.next_fits(start, len(meas.views), budget_s):
                 break  # the next view would overrun this configuration's time budget
     finally:
         renderer.release()
@@ -413,13 +127,12 @@ def time_gvxr(bench: BenchScene, n: int, repeats: int, views: list[int], budget_
     meas = Measurement("gvxr", bench.level, bench.triangles, n, 1, repeats)
     start = time.perf_counter()
     for view in views:
-        images, best = gvxr_path_lengths(bench.gvxr_meshes, SOD, SDD, (n, n), DET_WIDTH / n,
-                                         math.radians(ANGLES_DEG[view]), repeats=repeats)
+        images, best = gvxr_peer.gvxr_path_lengths(bench.gvxr_meshes, SOD, SDD, (n, n), DET_WIDTH / n,
+                                                   math.radians(ANGLES_DEG[view]), repeats=repeats)
         meas.views.append(view)
         meas.best_s.append(best)
         meas.samples.append({m: images[m][rc[:, 0], rc[:, 1]] for m in YARNS})
-        spent = time.perf_counter() - start
-        if spent * (len(meas.views) + 1) / len(meas.views) > budget_s:
+        if not common.next_fits(start, len(meas.views), budget_s):
             break
     return meas
 
@@ -488,8 +201,8 @@ def check_gvxr_frame(ctx) -> dict:
         geom = xr.ConeBeamGeometry(SOD, SDD, shape, pixel, [theta])
         with xr.Renderer(geom, overlap="sum", context=ctx) as r:
             ours = r.path_lengths(scene, 0).astype(np.float64)
-        g, _ = gvxr_path_lengths(parts, SOD, SDD, shape, pixel, theta, repeats=1)
-        g_neg, _ = gvxr_path_lengths(parts, SOD, SDD, shape, pixel, -theta, repeats=1)
+        g, _ = gvxr_peer.gvxr_path_lengths(parts, SOD, SDD, shape, pixel, theta, repeats=1)
+        g_neg, _ = gvxr_peer.gvxr_path_lengths(parts, SOD, SDD, shape, pixel, -theta, repeats=1)
         variants = {
             "as is": lambda im, m: im[m],
             "rows flipped": lambda im, m: im[m][::-1],
@@ -507,50 +220,8 @@ def check_gvxr_frame(ctx) -> dict:
 
 
 # ---------------------------------------------------------------------------------------------
-# Output
+# Plots
 # ---------------------------------------------------------------------------------------------
-
-
-def machine_info(ctx) -> dict:
-    cpu = "unknown"
-    try:
-        with open("/proc/cpuinfo") as f:
-            cpu = next((line.split(":", 1)[1].strip() for line in f if line.startswith("model name")), cpu)
-    except OSError:
-        pass
-    try:
-        from importlib.metadata import version
-
-        gvxr_version = version("gvxr")
-    except Exception:
-        gvxr_version = None
-    return {
-        "cpu": cpu,
-        "nproc": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count(),
-        "gl_renderer": ctx.ctx.info["GL_RENDERER"],
-        "gl_version": ctx.ctx.info["GL_VERSION"],
-        "gl_backend": ctx.backend,
-        "python": platform.python_version(),
-        "numpy": np.__version__,
-        "gvxr": gvxr_version,
-        "platform": platform.platform(),
-    }
-
-
-def write_json(path: Path, payload: dict) -> None:
-    """Write atomically: a reader never sees a half-written file."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as f:
-            json.dump(payload, f, indent=1)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        os.unlink(tmp)
-        raise
-
 
 STYLE = {
     "sum": ("C0", "o", "ours, single pass (sum)"),
@@ -561,96 +232,63 @@ STYLE = {
 
 
 def plot(records: list[dict], plots_dir: Path, top: int, sweep_size: int) -> list[Path]:
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-        import matplotlib.ticker
-    except ImportError as exc:
-        say(f"plots skipped: matplotlib unavailable ({exc})")
+    plt = common.pyplot()
+    if plt is None:
         return []
-    plots_dir.mkdir(parents=True, exist_ok=True)
+    import matplotlib.ticker
 
-    # (name, title, error kind plotted, which records, order along the sweep, point label)
+    # (title, error kind plotted, which records, order along the sweep, point label)
     sweeps = [
-        ("tessellation", f"tessellation sweep ({sweep_size}², k=1)", "smooth",
+        (f"tessellation sweep ({sweep_size}², k=1)", "smooth",
          lambda r: r["detector"] == sweep_size and r["supersampling"] == 1,
          lambda r: r["triangles"], lambda r: f"{r['triangles'] / 1e3:,.0f}k"),
-        ("supersampling", f"supersampling sweep ({sweep_size}², {top_tris(records, top)})", "pixel",
+        (f"supersampling sweep ({sweep_size}², {top_tris(records, top)})", "pixel",
          lambda r: r["level"] == top and r["detector"] == sweep_size,
          lambda r: r["supersampling"], lambda r: f"k={r['supersampling']}"),
-        ("detector", f"detector sweep ({top_tris(records, top)}, k=1)", "exact",
+        (f"detector sweep ({top_tris(records, top)}, k=1)", "exact",
          lambda r: r["level"] == top and r["supersampling"] == 1,
          lambda r: r["detector"], lambda r: f"{r['detector']}²"),
     ]
 
     def series(sweep, method):
-        _, _, _, select, order, _ = sweep
+        _, _, select, order, _ = sweep
         return sorted((r for r in records if r["method"] == method and select(r)), key=order)
+
+    def time_vs_error(ax, rs, kind, stat, label, colour, marker, legend):
+        x = [r["s_per_view"] for r in rs]
+        y = [max(r["errors_mm"][kind][stat], 1e-9) for r in rs]
+        common.curve(ax, x, y, [label(r) for r in rs], color=colour, marker=marker, label=legend)
 
     out = []
     fig, axes = plt.subplots(3, 2, figsize=(11, 13))
     for sweep, row_axes in zip(sweeps, axes):
-        _, title, kind, _, _, label = sweep
+        title, kind, _, _, label = sweep
         for stat, ax in zip(("max", "p99.9"), row_axes):
-            for method, (colour, marker, legend) in STYLE.items():
-                rs = series(sweep, method)
-                if not rs:
-                    continue
-                x = [r["s_per_view"] for r in rs]
-                y = [max(r["errors_mm"][kind][stat], 1e-9) for r in rs]
-                ax.plot(x, y, marker=marker, color=colour, label=legend)
-                for r, xi, yi in zip(rs, x, y):
-                    ax.annotate(label(r), (xi, yi), textcoords="offset points", xytext=(4, 4), fontsize=7, color=colour)
-            ax.set_xscale("log")
-            ax.set_yscale("log")
-            ax.set_xlabel("time per view (s)")
-            ax.set_ylabel(f"{stat} |error| vs {kind} reference (mm)")
-            ax.set_title(f"{title}: {stat}", fontsize=9)
-            ax.grid(True, which="both", alpha=0.3)
-            ax.legend(fontsize=7)
+            for method, style in STYLE.items():
+                if rs := series(sweep, method):
+                    time_vs_error(ax, rs, kind, stat, label, *style)
+            common.log_axes(ax, "time per view (s)", f"{stat} |error| vs {kind} reference (mm)", f"{title}: {stat}")
     fig.suptitle("xrayraster path lengths: time per view vs error\nerror vs: smooth shapes on the same rays (tessellation), "
                  "smooth shapes averaged over the pixel (supersampling),\nexact chords of the same meshes (detector)", fontsize=9)
     fig.tight_layout()
-    path = plots_dir / "bench_render_time_vs_error.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    out.append(path)
+    out.append(common.save(fig, plots_dir / "bench_render_time_vs_error.png"))
 
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.5))
     sizes = sorted({r["detector"] for r in series(sweeps[2], "sum")})
     for method, (colour, marker, legend) in STYLE.items():
-        rs = series(sweeps[2], method)
-        if not rs:
+        if not (rs := series(sweeps[2], method)):
             continue
         axes[0].plot([r["detector"] for r in rs], [r["s_per_view"] for r in rs], marker=marker, color=colour, label=legend)
         for ax, stat in zip(axes[1:], ("max", "p99.9")):
-            x = [r["s_per_view"] for r in rs]
-            y = [max(r["errors_mm"]["exact"][stat], 1e-9) for r in rs]
-            ax.plot(x, y, marker=marker, color=colour, label=legend)
-            for r, xi, yi in zip(rs, x, y):
-                ax.annotate(f"{r['detector']}²", (xi, yi), textcoords="offset points", xytext=(4, 4), fontsize=7, color=colour)
-    axes[0].set_xscale("log")
+            time_vs_error(ax, rs, "exact", stat, sweeps[2][4], colour, marker, legend)
+    common.log_axes(axes[0], "detector (pixels)", "time per view (s)")
     axes[0].set_xticks(sizes, [f"{n}²" for n in sizes])
     axes[0].xaxis.set_minor_locator(matplotlib.ticker.NullLocator())
-    axes[0].set_yscale("log")
-    axes[0].set_xlabel("detector (pixels)")
-    axes[0].set_ylabel("time per view (s)")
     for ax, stat in zip(axes[1:], ("max", "p99.9")):
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlabel("time per view (s)")
-        ax.set_ylabel(f"{stat} |error| vs exact polyhedral chords (mm)")
-    for ax in axes:
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=7)
+        common.log_axes(ax, "time per view (s)", f"{stat} |error| vs exact polyhedral chords (mm)")
     fig.suptitle(f"detector sweep, {top_tris(records, top)}, k=1", fontsize=10)
     fig.tight_layout()
-    path = plots_dir / "bench_render_detector.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    out.append(path)
+    out.append(common.save(fig, plots_dir / "bench_render_detector.png"))
     return out
 
 
@@ -663,19 +301,13 @@ def top_tris(records, top) -> str:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--quick", action="store_true", help="small sizes only: a smoke test that finishes in < 60 s")
+    ap = common.parser(__doc__, "small sizes only: a smoke test that finishes in < 60 s", plots=True)
     ap.add_argument("--sizes", type=int, nargs="+", help="detector sides of the detector sweep (default 256 512 1024 2048)")
     ap.add_argument("--levels", type=int, nargs="+", help="tessellation levels: sections per warp/weft tube (default 6 18 60)")
     ap.add_argument("--supersampling", type=int, nargs="+", help="k values of the supersampling sweep (default 1 2 3 4)")
     ap.add_argument("--sweep-size", type=int, help="detector side of the tessellation and supersampling sweeps (default 512)")
     ap.add_argument("--no-gvxr", action="store_true", help="do not run gVirtualXRay")
-    ap.add_argument("--json", type=Path, help="results file (default out/bench_render.json; --quick: out/bench_render_quick.json)")
-    ap.add_argument("--plots-dir", type=Path, help="where the PNG plots go (default docs/; --quick: out/, so a smoke test "
-                    "never overwrites the published plots)")
-    args = ap.parse_args(argv)
-    args.json = args.json or ROOT / "out" / ("bench_render_quick.json" if args.quick else "bench_render.json")
-    args.plots_dir = args.plots_dir or (ROOT / "out" if args.quick else ROOT / "docs")
+    args = common.outputs(ap.parse_args(argv), "bench_render")
 
     if args.quick:
         sizes, levels, ks, sweep_size = [64, 128], [6, 12], [1, 2], 128
@@ -690,19 +322,17 @@ def main(argv=None) -> int:
     top = levels[-1]
 
     t_start = time.perf_counter()
-    command = shlex.join([sys.executable, *sys.argv])
+    command = common.command_line()
     ctx = xr.GLContext()
-    machine = machine_info(ctx)
-    say(f"command: {command}")
-    say(f"machine: {machine['cpu']}, {machine['nproc']} CPUs; GL: {machine['gl_renderer']} ({machine['gl_version']}, {machine['gl_backend']})")
-    say(f"python {machine['python']}, numpy {machine['numpy']}, gvxr {machine['gvxr']}")
+    machine = common.machine_info(gl=ctx)
+    common.print_machine(machine, command)
     say(f"geometry: cone beam SOD {SOD} mm, SDD {SDD} mm (magnification {SDD / SOD:.1f}), detector {DET_WIDTH} mm wide, "
         f"views at {', '.join(f'{a:g}°' for a in ANGLES_DEG)}")
     say(f"sweeps: tessellation levels {levels} at {sweep_size}², k=1; detector {sizes} and supersampling {ks} at level {top}; "
         f"best of {repeats} per view, up to {max_views} views, ~{budget:g} s budget per configuration; "
         f"errors on {pixels} seeded pixels per view")
 
-    gvxr_reason = "disabled (--no-gvxr)" if args.no_gvxr else gvxr_available()
+    gvxr_reason = "disabled (--no-gvxr)" if args.no_gvxr else gvxr_peer.gvxr_available()
     frame = None
     if gvxr_reason:
         say(f"gVirtualXRay: not run: {gvxr_reason}")
@@ -766,7 +396,7 @@ def main(argv=None) -> int:
                 say(f"{'':>9} {'':>5} {'':>2} {'':>7}   gvxr/ours time ratio {c['ratio']:.2f} on {len(c['views_deg'])} view(s); "
                     f"exact max ours {c['ours']['max']:.2e} vs gvxr {c['gvxr']['max']:.2e}, "
                     f"p99.9 {c['ours']['p99.9']:.2e} vs {c['gvxr']['p99.9']:.2e} mm")
-            write_json(args.json, payload)  # after every configuration: a cut-short run keeps its data
+            common.write_json(args.json, payload)  # after every configuration: a cut-short run keeps its data
         del bench
 
     say("\nreference computation (float64, sampled pixels): {:.1f} s".format(refs.seconds))
@@ -786,7 +416,8 @@ def main(argv=None) -> int:
     for path in plot(records, args.plots_dir, top, sweep_size):
         say(f"plot: {path}")
     payload["total_s"] = time.perf_counter() - t_start
-    write_json(args.json, payload)
+    say(common.finish(machine))
+    common.write_json(args.json, payload)
     say(f"results: {args.json}")
     say(f"total {payload['total_s']:.1f} s")
     # ctx is deliberately not released: gvxr_peer destroys gvxr's context at exit and then
@@ -809,4 +440,4 @@ def compare(ours: Measurement, gvxr: Measurement, refs: References, bench: Bench
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

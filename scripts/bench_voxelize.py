@@ -1,4 +1,3 @@
-#!/usr/bin/env python3
 """Voxelizer benchmark: ``xr.voxelize`` beside VTK's stencil voxelizer, same scene, same grid.
 
 The scene (mm, scanner frame; three overlapping convex objects, 1.31 M triangles)
@@ -23,7 +22,7 @@ What is timed
   of 2 calls (256³, 64³) or 1 call (512³).
 * ours, ``method="stencil"``: the classic slice-by-slice stencil counting in the same GL
   pipeline (xrayraster/gl/voxelize_stencil.py), one call per size, for comparison.
-* VTK: ``scripts/vtk_peer.py``'s ``vtk_voxelize``: one ``vtkPolyDataToImageStencil`` +
+* VTK: ``scripts/peers/vtk_peer.py``'s ``vtk_voxelize``: one ``vtkPolyDataToImageStencil`` +
   ``vtkImageStencilToImage`` per object on the same grid (VTK's default tolerance), numpy
   views, and the priority painting of the masks. The time compared is the end-to-end label
   volume (``total_seconds``: VTK work + painting), best of the same number of calls as ours.
@@ -50,8 +49,8 @@ Reported: disagreement counts of ours and of VTK with the reference, and the num
 
 Usage::
 
-    python scripts/bench_voxelize.py           # 256³ and 512³ (~2 min on 2 cores, most of it VTK)
-    python scripts/bench_voxelize.py --quick   # 64³ smoke test with a small mesh
+    python -m scripts.bench_voxelize           # 256³ and 512³ (~2 min on 2 cores, most of it VTK)
+    python -m scripts.bench_voxelize --quick   # 64³ smoke test with a small mesh
 
 Prints a table, writes out/bench_voxelize.json (``--quick``: out/bench_voxelize_quick.json) and
 plots docs/bench_voxelize.png (``--quick``: out/bench_voxelize_quick.png).
@@ -59,12 +58,7 @@ plots docs/bench_voxelize.png (``--quick``: out/bench_voxelize_quick.png).
 
 from __future__ import annotations
 
-import argparse
 import math
-import os
-import platform
-import shlex
-import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -72,16 +66,12 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))  # run from a checkout without installing the package
-sys.path.insert(0, str(ROOT / "scripts"))
+import xrayraster as xr
+from scripts import common
+from scripts.common import say
+from scripts.peers import vtk_peer
+from scripts.weave_scene import face_planes
 
-import xrayraster as xr  # noqa: E402
-
-import bench_render as br  # noqa: E402
-from vtk_peer import vtk_available, vtk_version, vtk_voxelize  # noqa: E402
-
-say = br.say
 FOV_MM = 25.6
 REPEATS = {64: 2, 256: 2, 512: 1}  # timed calls after the first (ours) / calls (VTK); best taken
 POINTS = 100_000
@@ -119,7 +109,7 @@ class ConvexSolid:
     @classmethod
     def of(cls, obj: xr.SceneObject) -> "ConvexSolid":
         v, f = obj.mesh.vertices, obj.mesh.faces
-        normals, offsets = br.face_planes(v, f)  # coplanar faces merged: a box is 6 planes
+        normals, offsets = face_planes(v, f)  # coplanar faces merged: a box is 6 planes
         centre = v.mean(axis=0)
         depth = offsets - normals @ centre
         if depth.min() <= 0:
@@ -204,12 +194,8 @@ def run_case(n: int, scene: xr.Scene, solids: list[ConvexSolid], ctx: xr.GLConte
     t0 = time.perf_counter()
     ours = xr.voxelize(scene, vol, context=ctx).data
     rec["ours_first_call_s"] = time.perf_counter() - t0
-    times = []
-    for _ in range(repeats):
-        del ours  # free the previous output first: at 512³ it is 128 MiB
-        t0 = time.perf_counter()
-        ours = xr.voxelize(scene, vol, context=ctx).data
-        times.append(time.perf_counter() - t0)
+    del ours  # free each output before the next call: at 512³ it is 128 MiB
+    times, ours = common.repeat(lambda: xr.voxelize(scene, vol, context=ctx).data, repeats, free_previous=True)
     rec["ours_s"], rec["ours_all_s"] = min(times), times
     say(f"  ours: {rec['ours_s']:.3f} s (best of {repeats}; first call {rec['ours_first_call_s']:.3f} s), "
         f"{n**3 / rec['ours_s'] / 1e6:.1f} M voxels/s")
@@ -243,7 +229,7 @@ def run_case(n: int, scene: xr.Scene, solids: list[ConvexSolid], ctx: xr.GLConte
     if with_vtk:
         runs = []
         for _ in range(repeats):
-            runs.append(vtk_voxelize(scene, vol))
+            runs.append(vtk_peer.vtk_voxelize(scene, vol))
             theirs = runs[-1].pop("labels")  # keep only the latest volume
         best = min(runs, key=lambda r: r["total_seconds"])
         rec["vtk_s"] = best["total_seconds"]
@@ -271,13 +257,8 @@ def run_case(n: int, scene: xr.Scene, solids: list[ConvexSolid], ctx: xr.GLConte
 
 
 def plot(records: list[dict], path: Path, title: str) -> Path | None:
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError as exc:
-        say(f"plot skipped: matplotlib unavailable ({exc})")
+    plt = common.pyplot()
+    if plt is None:
         return None
     fig, ax = plt.subplots(figsize=(6.5, 4.8))
     series = (("ours", "xrayraster (OpenGL, llvmpipe)", "C0", "o", -14),
@@ -287,65 +268,43 @@ def plot(records: list[dict], path: Path, title: str) -> Path | None:
         rs = [r for r in records if f"{key}_s" in r]
         if not rs:
             continue
-        ax.plot([r["size"] for r in rs], [r[f"{key}_s"] for r in rs], marker=marker, color=colour, label=label)
-        for r in rs:
-            ax.annotate(f"{r[f'{key}_disagree']} / {r['points_far']:,} disagree", (r["size"], r[f"{key}_s"]),
-                        textcoords="offset points", xytext=(6, dy), fontsize=7, color=colour)
+        common.curve(ax, [r["size"] for r in rs], [r[f"{key}_s"] for r in rs],
+                     [f"{r[f'{key}_disagree']} / {r['points_far']:,} disagree" for r in rs],
+                     color=colour, marker=marker, label=label, offset=(6, dy))
     first = [r for r in records if "ours_first_call_s" in r]
     ax.plot([r["size"] for r in first], [r["ours_first_call_s"] for r in first], ls=":", marker="o", mfc="none",
             color="C0", alpha=0.6, label="xrayraster, first call per size")
-    ax.set_xscale("log", base=2)
-    ax.set_yscale("log")
+    common.log_axes(ax, f"label volume (voxels; field of view {FOV_MM} mm)", "time (s), best of runs", title,
+                    xbase=2, legend=None)
     sizes = [r["size"] for r in records]
     ax.set_xticks(sizes, [f"{n}³" for n in sizes])
     ax.minorticks_off()
     if len(sizes) == 1:
         ax.set_xlim(sizes[0] / 1.6, sizes[0] * 1.6)
-    ax.set_xlabel(f"label volume (voxels; field of view {FOV_MM} mm)")
-    ax.set_ylabel("time (s), best of runs")
-    ax.set_title(title, fontsize=9)
-    ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8, loc="upper left")
     fig.text(0.01, 0.01, "labels: disagreements with the exact reference at random voxel centres "
              f"> {MIN_DISTANCE:g} voxel from every surface", fontsize=7, color="0.3")
     fig.tight_layout(rect=(0, 0.03, 1, 1))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return common.save(fig, path)
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = common.parser(__doc__, "64³ with a 1,280-triangle sphere: a smoke test")
     ap.add_argument("--sizes", type=int, nargs="+", choices=[256, 512], default=[256, 512])
-    ap.add_argument("--quick", action="store_true", help="64³ with a 1,280-triangle sphere: a smoke test")
     ap.add_argument("--no-vtk", action="store_true", help="do not run VTK")
-    ap.add_argument("--json", type=Path, default=None, help="results (default out/bench_voxelize.json; --quick: _quick)")
-    ap.add_argument("--plot", type=Path, default=None, help="PNG (default docs/bench_voxelize.png; --quick: out/)")
-    args = ap.parse_args(argv)
+    ap.add_argument("--plot", type=Path, default=None, help="PNG (default docs/bench_voxelize.png; --quick: "
+                    "out/bench_voxelize_quick.png)")
+    args = common.outputs(ap.parse_args(argv), "bench_voxelize")
     sizes = [64] if args.quick else sorted(args.sizes)
-    args.json = args.json or ROOT / "out" / ("bench_voxelize_quick.json" if args.quick else "bench_voxelize.json")
-    args.plot = args.plot or (ROOT / "out" / "bench_voxelize_quick.png" if args.quick else ROOT / "docs" / "bench_voxelize.png")
+    args.plot = args.plot or (common.OUT / "bench_voxelize_quick.png" if args.quick else common.DOCS / "bench_voxelize.png")
 
     start = time.perf_counter()
-    machine = {"loadavg_start": os.getloadavg()}
-    say(f"command: {shlex.join([sys.executable, *sys.argv])}")
-    reason = "disabled (--no-vtk)" if args.no_vtk else vtk_available()
+    command = common.command_line()
+    reason = "disabled (--no-vtk)" if args.no_vtk else vtk_peer.vtk_available()
     ctx = xr.GLContext()
-    cpu = platform.processor() or "unknown"
-    try:
-        with open("/proc/cpuinfo") as f:
-            cpu = next((line.split(":", 1)[1].strip() for line in f if line.startswith("model name")), cpu)
-    except OSError:
-        pass
-    nproc = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    machine.update({"cpu": cpu, "nproc": nproc, "gl_renderer": ctx.ctx.info["GL_RENDERER"],
-                    "gl_version": ctx.ctx.info["GL_VERSION"], "gl_backend": ctx.backend,
-                    "python": platform.python_version(), "numpy": np.__version__,
-                    "vtk": None if reason else vtk_version()})
-    say(f"machine: {cpu}, {nproc} CPUs; GL: {machine['gl_renderer']} ({machine['gl_version']}, {machine['gl_backend']})")
-    say(f"python {machine['python']}, numpy {machine['numpy']}, VTK: {reason or machine['vtk']}")
-    say("load average at start: " + ", ".join(f"{x:.2f}" for x in machine["loadavg_start"]))
+    machine = common.machine_info(gl=ctx)
+    common.print_machine(machine, command)
+    say(f"VTK: {reason or vtk_peer.vtk_version()}")
 
     scene, build_s = build_scene(args.quick)
     solids = [ConvexSolid.of(o) for o in scene.objects]
@@ -354,7 +313,7 @@ def main(argv=None) -> int:
     say(f"scene: {scene.num_triangles:,} triangles ("
         + ", ".join(f"{d['name']} {d['triangles']:,}, label {d['label']}, priority {d['priority']:g}" for d in objects)
         + f"), built in {build_s:.1f} s; field of view {FOV_MM} mm; sizes {', '.join(f'{n}³' for n in sizes)}")
-    payload = {"command": shlex.join([sys.executable, *sys.argv]), "machine": machine,
+    payload = {"command": command, "machine": machine,
                "settings": {"fov_mm": FOV_MM, "repeats": {n: REPEATS[n] for n in sizes}, "points": POINTS,
                             "min_distance_voxels": MIN_DISTANCE, "quick": args.quick},
                "scene": {"triangles": scene.num_triangles, "objects": objects, "build_s": build_s},
@@ -362,7 +321,7 @@ def main(argv=None) -> int:
     records = payload["records"]
     for n in sizes:
         records.append(run_case(n, scene, solids, ctx, reason is None))
-        br.write_json(args.json, payload)  # after every size: a cut-short run keeps its data
+        common.write_json(args.json, payload)  # after every size: a cut-short run keeps its data
 
     say("\n  size │ ours s   first s  M vox/s  disagree │ stencil s disagree │ VTK s     M vox/s  disagree │ VTK/ours  "
         "ours≠VTK voxels   (disagree: of the far reference points)")
@@ -372,13 +331,13 @@ def main(argv=None) -> int:
         say(f"  {r['size']:>3}³ │ {r['ours_s']:>7.3f} {r['ours_first_call_s']:>8.3f} {r['voxels'] / r['ours_s'] / 1e6:>8.1f} "
             f"{r['ours_disagree']:>9} │ {r['stencil_s']:>9.3f} {r['stencil_disagree']:>8} │ {vtk}   of {r['points_far']:,}")
     png = plot(records, args.plot, f"label voxelization, {scene.num_triangles:,} triangles in 3 overlapping objects")
-    machine["loadavg_end"] = os.getloadavg()
+    line = common.finish(machine)
     payload["total_s"] = time.perf_counter() - start
-    br.write_json(args.json, payload)
-    say(f"load average at end: {', '.join(f'{x:.2f}' for x in machine['loadavg_end'])}; results {args.json}"
+    common.write_json(args.json, payload)
+    say(f"{line}; results {args.json}"
         + (f"; plot {png}" if png else "") + f"; total {payload['total_s']:.1f} s")
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

@@ -49,7 +49,7 @@ neighbouring views, so uneven full-circle sampling is fine).
 Threads: ITK's global thread settings (itk.MultiThreaderBase) are process-wide; rtk_fdk sets
 them to ``threads`` before building its filters, and they stay so afterwards.
 
-Verified by ``python scripts/rtk_peer.py`` (exits non-zero on any failure):
+Verified by ``python -m scripts.peers.rtk_peer`` (exits non-zero on any failure):
 * RTK's own source positions and pixel positions (GetSourcePosition,
   GetProjectionCoordinatesToFixedSystemMatrix), mapped back through Pᵀ, equal ours to ~1e-13 mm
   for several views with and without a detector offset;
@@ -74,15 +74,12 @@ cover the whole object would need RTK's displaced-detector weights).
 from __future__ import annotations
 
 import math
-import os
 import sys
 import time
 
 import numpy as np
 
-# Run from a checkout without installing the package.
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
-from xrayraster import ConeBeamGeometry, VolumeGeometry  # noqa: E402
+from xrayraster import ConeBeamGeometry, VolumeGeometry
 
 _itk = None            # the itk module once RTK imported
 _rtk = None            # itk.RTK
@@ -208,15 +205,12 @@ def rtk_fdk(projections: np.ndarray, geometry: ConeBeamGeometry, volume: VolumeG
 
 # ----------------------------------------------------------------------------- self-check
 
-def _rot_z(theta):
-    c, s = math.cos(theta), math.sin(theta)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
 def _source_and_pixels(geometry: ConeBeamGeometry, theta: float):
     """Our source (3,) and pixel centres (rows, cols, 3) in mm, written out from the convention."""
     (nr, nc), (pv, pu), (ov, ou) = geometry.detector_shape, geometry.pixel_size, geometry.detector_offset
-    rot = _rot_z(theta)
+    from references.chords import rot_z
+
+    rot = rot_z(theta)
     sod, sdd = geometry.source_to_origin, geometry.source_to_detector
     src = rot @ (0.0, -sod, 0.0)
     u, v = rot @ (1.0, 0.0, 0.0), np.array([0.0, 0.0, 1.0])

@@ -58,7 +58,7 @@ Timing: ``seconds`` is the wall time of the VTK work for all objects: building t
 scalars. ``combine_seconds`` is the painting of the masks into the label volume (numpy), and
 ``total_seconds`` the sum: the end-to-end label volume, what ``xr.voxelize`` returns.
 
-Self-check: ``python scripts/vtk_peer.py`` voxelizes a small off-centre scene (a rotated box and
+Self-check: ``python -m scripts.peers.vtk_peer`` voxelizes a small off-centre scene (a rotated box and
 a higher-priority sphere overlapping it) on an anisotropic, offset grid with both codes, prints
 the fraction of voxels that agree and how far from a surface the disagreeing voxel centres are,
 and exits non-zero if fewer than 99 % agree, if any disagreement lies more than a voxel from a
@@ -72,14 +72,10 @@ from __future__ import annotations
 
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))  # run from a checkout without installing the package
-
-import xrayraster as xr  # noqa: E402
+import xrayraster as xr
 
 __all__ = ["vtk_available", "vtk_voxelize", "vtk_grid"]
 

@@ -17,7 +17,7 @@ centres, so no flip/transpose is needed; its unit is cm whatever unit the mesh w
 (checked: mm/cm/um meshes give the same values).  We return ``10 * lbuffer`` so that [r, c]
 is the path length in mm along the ray from the source to our pixel centre
 det_centre + (c-(ncol-1)/2)*pixel*u + (r-(nrow-1)/2)*pixel*v.  Self-check against an exact
-float64 slab ray/box computation: ``python3 scripts/gvxr_peer.py``.  With a near source
+float64 slab ray/box computation: ``python -m scripts.peers.gvxr_peer``.  With a near source
 gvxr's error grows with triangle size (it interpolates the depth across each triangle in
 screen space: ~0.2 mm max on a 12-triangle 10 mm cube at SOD=100, <1e-3 mm once subdivided);
 with a far source it is ~1e-4 mm (float32).
@@ -157,6 +157,14 @@ def _init():
         _init_error = f"{type(exc).__name__}: {exc}"
 
 
+def _require():
+    """The gvxr module, initialised; RuntimeError with the reason if it cannot be."""
+    _init()
+    if _init_error is not None:
+        raise RuntimeError(f"gvxr unavailable: {_init_error}")
+    return _gvxr
+
+
 def gvxr_available() -> str | None:
     """None if gvxr can be imported and its headless OpenGL context created, else a reason."""
     _init()
@@ -197,6 +205,23 @@ def _upload(meshes_by_material):
     _scene_key = key
 
 
+def _placement(sod_mm: float, sdd_mm: float, angle_rad: float):
+    """A call that moves gvxr's source and detector to our view at ``angle_rad`` (see the module docstring)."""
+    c, s = np.cos(angle_rad), np.sin(angle_rad)
+    src = (float(sod_mm * s), float(-sod_mm * c), 0.0)          # R_z(theta) @ (0, -SOD, 0)
+    odd = float(sdd_mm - sod_mm)
+    det = (float(-odd * s), float(odd * c), 0.0)                 # R_z(theta) @ (0, SDD-SOD, 0)
+    right = (float(c), float(s), 0.0)                            # R_z(theta) @ (1, 0, 0)
+
+    def place():
+        _gvxr.setSourcePosition(*src, "mm")
+        _gvxr.setDetectorPosition(*det, "mm")
+        _gvxr.setDetectorUpVector(0.0, 0.0, 1.0)
+        _gvxr.setDetectorRightVector(*right)
+
+    return place
+
+
 def gvxr_path_lengths(meshes_by_material: dict[str, list[tuple[np.ndarray, np.ndarray]]],
                       sod_mm: float, sdd_mm: float, shape: tuple[int, int], pixel_mm: float,
                       angle_rad: float = 0.0, repeats: int = 3
@@ -214,22 +239,12 @@ def gvxr_path_lengths(meshes_by_material: dict[str, list[tuple[np.ndarray, np.nd
     Not timed: gvxr import and context creation, mesh fingerprint and upload (skipped while
     the same meshes are passed), detector resolution/pixel-size set-up, EGL context switch.
     """
-    _init()
-    if _init_error is not None:
-        raise RuntimeError(f"gvxr unavailable: {_init_error}")
-    g = _gvxr
+    g = _require()
     nrow, ncol = (int(s) for s in shape)
-    c, s = np.cos(angle_rad), np.sin(angle_rad)
-    src = (float(sod_mm * s), float(-sod_mm * c), 0.0)          # R_z(theta) @ (0, -SOD, 0)
-    odd = float(sdd_mm - sod_mm)
-    det = (float(-odd * s), float(odd * c), 0.0)                 # R_z(theta) @ (0, SDD-SOD, 0)
-    right = (float(c), float(s), 0.0)                            # R_z(theta) @ (1, 0, 0)
+    place = _placement(sod_mm, sdd_mm, angle_rad)
 
     def render():
-        g.setSourcePosition(*src, "mm")
-        g.setDetectorPosition(*det, "mm")
-        g.setDetectorUpVector(0.0, 0.0, 1.0)
-        g.setDetectorRightVector(*right)
+        place()
         return {mat: 10.0 * np.asarray(g.computeLBuffer(lab), dtype=np.float64)
                 for mat, lab in _labels.items()}
 
@@ -255,10 +270,7 @@ def gvxr_set_materials(meshes_by_material, materials):
     ``{"warp": (["C"], [1.0], 1.8)}``; set with gvxr.setMixture (mass fractions, as
     gvxr's "weights") + gvxr.setDensity(..., "g/cm3").  Uploads the meshes first if needed.
     Returns {material: gvxr label}."""
-    _init()
-    if _init_error is not None:
-        raise RuntimeError(f"gvxr unavailable: {_init_error}")
-    g = _gvxr
+    g = _require()
     with _quiet(), _gvxr_context():
         _upload(meshes_by_material)
         for mat, label in _labels.items():
@@ -301,20 +313,13 @@ def gvxr_xray_image(meshes_by_material, materials, energies_kev, photons, sod_mm
     gvxr_set_materials(meshes_by_material, materials)
     g = _gvxr
     nrow, ncol = (int(s) for s in shape)
-    c, s = np.cos(angle_rad), np.sin(angle_rad)
-    src = (float(sod_mm * s), float(-sod_mm * c), 0.0)
-    odd = float(sdd_mm - sod_mm)
-    det = (float(-odd * s), float(odd * c), 0.0)
-    right = (float(c), float(s), 0.0)
+    place = _placement(sod_mm, sdd_mm, angle_rad)
     energies = np.asarray(energies_kev, np.float64)
     photons = np.asarray(photons, np.float64)
     given = int(np.count_nonzero(photons > 0))
 
     def render(flat):
-        g.setSourcePosition(*src, "mm")
-        g.setDetectorPosition(*det, "mm")
-        g.setDetectorUpVector(0.0, 0.0, 1.0)
-        g.setDetectorRightVector(*right)
+        place()
         return np.asarray(g.computeXRayImage(), dtype=np.float64) / flat
 
     best = float("inf")
@@ -347,29 +352,14 @@ def _box(centre, size):
     return v * size / 2 + np.asarray(centre, float), f
 
 
-def _exact_box_lengths(boxes, sod, sdd, shape, pixel, angle):
-    """Exact float64 path length through disjoint axis-aligned boxes (slab method), our frame."""
-    c, s = np.cos(angle), np.sin(angle)
-    rot = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
-    src, det, u = rot @ (0, -sod, 0), rot @ (0, sdd - sod, 0), rot @ (1, 0, 0)
-    r, col = np.mgrid[:shape[0], :shape[1]]
-    d = (det + ((col - (shape[1] - 1) / 2) * pixel)[..., None] * u
-         + ((r - (shape[0] - 1) / 2) * pixel)[..., None] * np.array([0, 0, 1.0])) - src
-    total = np.zeros(shape)
-    for centre, size in boxes:
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t1 = (np.asarray(centre) - size / 2 - src) / d
-            t2 = (np.asarray(centre) + size / 2 - src) / d
-        t0 = np.nanmax(np.minimum(t1, t2), axis=-1)
-        t3 = np.nanmin(np.maximum(t1, t2), axis=-1)
-        total += np.clip(t3 - t0, 0, None) * np.linalg.norm(d, axis=-1)
-    return total
+def _self_check() -> int:
+    """Orientation / unit self-check against exact float64 ray-box lengths (slab method)."""
+    from references.chords import box_chord, cone_rays
 
-
-if __name__ == "__main__":  # orientation / unit self-check against exact ray-box lengths
     reason = gvxr_available()
     if reason:
-        sys.exit(f"gvxr unavailable: {reason}")
+        print(f"gvxr unavailable: {reason}")
+        return 2
     boxes = {"a": [((5.0, 0.0, 8.0), 10.0), ((-6.0, 3.0, -5.0), 4.0)],  # two meshes, one material
              "b": [((-4.0, -2.0, 4.0), 3.0)]}
     meshes = {m: [_box(*b) for b in bs] for m, bs in boxes.items()}
@@ -377,8 +367,15 @@ if __name__ == "__main__":  # orientation / unit self-check against exact ray-bo
     for sod, sdd in ((100.0, 200.0), (10000.0, 10100.0)):
         for angle in (0.0, 0.7):
             out, sec = gvxr_path_lengths(meshes, sod, sdd, shape, pixel, angle)
+            origins, dirs = cone_rays(sod, sdd, shape, pixel, angle)
             for m, bs in boxes.items():
-                err = np.abs(out[m] - _exact_box_lengths(bs, sod, sdd, shape, pixel, angle))
+                exact = sum(box_chord(origins, dirs, np.asarray(c), np.eye(3), (size / 2,) * 3) for c, size in bs)
+                err = np.abs(out[m] - exact)
                 print(f"SOD={sod:g} SDD={sdd:g} angle={angle} material={m}: "
                       f"max|err|={err.max():.3g} mm mean|err|={err.mean():.3g} mm "
                       f"({sec * 1e3:.1f} ms/view)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(_self_check())

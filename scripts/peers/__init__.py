@@ -1,0 +1,1 @@
+"""Peer codes the benchmarks compare with (gVirtualXRay, RTK, VTK): each module loads its library on first use."""
