@@ -14,7 +14,8 @@ from typing import Iterable
 
 import numpy as np
 
-from xrayraster.core.geometry import VolumeGeometry, as_vector_geometry, detector_pixel_centres
+from xrayraster.core.geometry import as_vector_geometry, detector_pixel_centres
+from xrayraster.core.volume import VolumeGeometry
 
 __all__ = [
     "Ellipsoid",

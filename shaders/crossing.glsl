@@ -7,9 +7,9 @@
 //  * RESOLVE: the crossing is appended to the pixel's linked list for pathlength_resolve.comp.
 
 #ifdef RESOLVE
-layout(std430, binding = 4) buffer Heads { uint heads[]; };                 // per pixel, 0xFFFFFFFF = empty
-layout(std430, binding = 5) writeonly buffer Nodes { uvec4 nodes[]; };      // t bits, object*2 + exit, next, -
-layout(std430, binding = 6) buffer Counters { uint node_count; uint overflow_pixels; uint max_depth; };
+layout(std430, binding = BINDING_HEADS) buffer Heads { uint heads[]; };                 // per pixel, 0xFFFFFFFF = empty
+layout(std430, binding = BINDING_NODES) writeonly buffer Nodes { uvec4 nodes[]; };      // t bits, object*2 + exit, next, -
+layout(std430, binding = BINDING_COUNTERS) buffer Counters { uint node_count; uint overflow_pixels; uint max_depth; };
 uniform uint u_capacity;
 
 void record_crossing(ivec2 px, uint object, int side, float t) {
@@ -20,7 +20,7 @@ void record_crossing(ivec2 px, uint object, int side, float t) {
     }
 }
 #else
-layout(std430, binding = 4) buffer Accumulators { uint acc[]; };            // (channel, row, col)
+layout(std430, binding = BINDING_ACCUMULATORS) buffer Accumulators { uint acc[]; };            // (channel, row, col)
 uniform float u_fixed_scale;  // fixed-point units per mm, a power of two
 
 void record_crossing(ivec2 px, uint object, int side, float t) {

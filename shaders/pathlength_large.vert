@@ -3,8 +3,8 @@
 // (shaders/grow.glsl), six per triangle. Kept trivial on purpose: software GL runs this stage
 // on one thread, the compute pass on all cores.
 
-layout(std430, binding = 3) readonly buffer Large { uvec4 draw_command; uint large[]; };
-layout(std430, binding = 7) readonly buffer LargeCorners { vec2 large_corners[]; };
+layout(std430, binding = BINDING_LARGE) readonly buffer Large { uvec4 draw_command; uint large[]; };
+layout(std430, binding = BINDING_LARGE_CORNERS) readonly buffer LargeCorners { vec2 large_corners[]; };
 
 uniform ivec2 u_size;  // detector (cols, rows)
 

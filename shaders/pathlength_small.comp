@@ -10,8 +10,8 @@
 #include "grow.glsl"
 
 layout(local_size_x = 64) in;
-layout(std430, binding = 3) buffer Large { uint draw_count; uint draw_instances; uint draw_first; uint draw_base; uint large[]; };
-layout(std430, binding = 7) writeonly buffer LargeCorners { vec2 large_corners[]; };
+layout(std430, binding = BINDING_LARGE) buffer Large { uint draw_count; uint draw_instances; uint draw_first; uint draw_base; uint large[]; };
+layout(std430, binding = BINDING_LARGE_CORNERS) writeonly buffer LargeCorners { vec2 large_corners[]; };
 
 uniform uint u_num_triangles;
 

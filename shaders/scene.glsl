@@ -3,8 +3,8 @@
 
 // Three corners per triangle (xyz mm; the first corner's w holds the object number's bits):
 // a triangle soup, read in order, costs less than indexed vertices gathered at random.
-layout(std430, binding = 0) readonly buffer Triangles { vec4 corners[]; };
-layout(std430, binding = 2) readonly buffer Objects { uvec4 objects[]; };        // channel, active, container channel + 1, -
+layout(std430, binding = BINDING_TRIANGLES) readonly buffer Triangles { vec4 corners[]; };
+layout(std430, binding = BINDING_OBJECTS) readonly buffer Objects { uvec4 objects[]; };        // channel, active, container channel + 1, -
 
 uniform mat3x4 u_world_to_pixel;  // transposed 3x4: h = P (x - ref, 1); c' = h.x/h.z, r' = h.y/h.z
 uniform ivec2 u_size;             // detector (cols, rows)

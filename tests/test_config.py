@@ -255,7 +255,7 @@ material = "b"
 
 UNKNOWN = {
     "top level": ("colour = 1\n" + CONE + BOX, r"scene\.toml: unknown key\(s\) colour; allowed: detector, geometry, materials, objects, source$"),
-    "geometry": (with_geometry("num_view = 4"), GEOMETRY_AT + r": unknown key\(s\) num_view; allowed: angles_deg, beam, "),
+    "geometry": (with_geometry("num_view = 4"), GEOMETRY_AT + r": unknown key\(s\) num_view; allowed: angles_deg, arc_deg, beam, "),
     "geometry subtable": (CONE + "[geometry.detector]\nrows = 4\n" + BOX, GEOMETRY_AT + r": unknown key\(s\) detector; allowed: "),
     "object": (with_object('colour = "red"'), BALL_AT + r": unknown key\(s\) colour; allowed: label, material, mesh, name, "),
     "box": (with_object("mesh = { box = [1, 1, 1], sections = 4 }"), BALL_AT + r" mesh: unknown key\(s\) sections; allowed: box$"),

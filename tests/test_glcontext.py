@@ -4,13 +4,14 @@ gets an error that says what to install."""
 from __future__ import annotations
 
 import ctypes.util
+from pathlib import Path
 
 import numpy as np
 import pytest
 import trimesh
-from references.chords import box_chord, cone_rays
 
 import xrayraster as xr
+from references.chords import box_chord, cone_rays
 from xrayraster.gl import context as glcontext
 
 
@@ -23,9 +24,10 @@ def cube_error(context) -> float:
     return np.abs(got - box_chord(*cone_rays(100.0, 200.0, (64, 64), 0.5, 0.3), np.zeros(3), np.eye(3), (5, 5, 5))).max()
 
 
-def test_egl_and_osmesa_render_the_same_exact_lengths(gl, osmesa):
-    assert gl.backend in ("egl", "osmesa") and osmesa.backend == "osmesa"
+def test_egl_and_osmesa_render_the_same_exact_lengths(gl, request):
     assert cube_error(gl) <= 1e-4
+    osmesa = request.getfixturevalue("osmesa")  # after gl's programs are compiled: see below
+    assert gl.backend in ("egl", "osmesa") and osmesa.backend == "osmesa"
     assert cube_error(osmesa) <= 1e-4
 
 
@@ -53,12 +55,40 @@ def test_shaders_expand_includes_and_defines():
     assert "#include" not in text and "int hit_triangle(" in text
 
 
-def test_contexts_interleave_in_one_thread(gl, osmesa):
+def test_binding_slots_are_written_once_in_python():
+    """Every storage block of every stage takes its slot from the table in xrayraster/gl/bindings.py
+    (no literal slot in GLSL), each slot within the 8 that OpenGL 4.3 guarantees, and only
+    accumulators/heads (chosen by the RESOLVE define) share one."""
+    import re
+
+    from xrayraster.core.shader_files import read_shader
+    from xrayraster.gl.bindings import BINDINGS
+
+    shaders = Path(__file__).resolve().parents[1] / "shaders"
+    blocks = 0
+    for path in shaders.iterdir():
+        if path.suffix in (".glsl", ".comp", ".vert", ".frag"):
+            text = read_shader(path.name)
+            assert not re.search(r"binding\s*=\s*\d", text), path.name
+            for name in re.findall(r"binding = BINDING_(\w+)", text):
+                assert name.lower() in BINDINGS, (path.name, name)
+                blocks += 1
+    assert blocks == 17 and all(0 <= slot < 8 for slot in BINDINGS.values())  # every block in shaders/ counted
+    slots = sorted(BINDINGS.values())
+    shared = {slot for slot in slots if slots.count(slot) > 1}
+    assert {name for name, slot in BINDINGS.items() if slot in shared} == {"accumulators", "heads"}
+
+
+def test_contexts_interleave_in_one_thread(gl, request):
     """GL calls go to the current context: each entry point makes its own current first, so a
-    second context (created, used, released) or the other backend never captures our calls."""
+    second context (created, used, released) or the other backend never captures our calls.
+
+    Mesa 22.3 limit, measured: programs an EGL context compiles while an OSMesa context exists in
+    the process render zeros once OSMesa has rendered (programs compiled before it, or by a new
+    EGL context, are fine). So gl compiles first here; README.md advises one backend a process."""
     assert cube_error(gl) <= 1e-4
     with xr.GLContext("egl") as other:
         assert cube_error(other) <= 1e-4
     assert cube_error(gl) <= 1e-4
-    assert cube_error(osmesa) <= 1e-4
+    assert cube_error(request.getfixturevalue("osmesa")) <= 1e-4
     assert cube_error(gl) <= 1e-4

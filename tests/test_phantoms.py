@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from references.phantoms import (
+    _PHANTOM3D_MODIFIED_SHEPP_LOGAN,
     SHEPP_LOGAN_3D,
     Ellipsoid,
-    _PHANTOM3D_MODIFIED_SHEPP_LOGAN,
     chord_lengths,
     from_phantom3d_row,
     project,
@@ -24,10 +24,10 @@ from xrayraster.core.geometry import (
     ConeBeamGeometry,
     ParallelBeamGeometry,
     VectorGeometry,
-    VolumeGeometry,
     as_vector_geometry,
     detector_pixel_centres,
 )
+from xrayraster.core.volume import VolumeGeometry
 
 
 def test_sphere_chords_closed_form():

@@ -118,6 +118,6 @@ def test_triangle_pass_spans_two_dispatch_dimensions(gl):
     geom = xr.ConeBeamGeometry(40.0, 100.0, (N, N), 0.2, [0.2])
     with xr.Renderer(geom, context=gl) as r:
         want = r.path_lengths(scene)
-        r._max_groups = 7  # 2,104 triangles: 33 groups in rows of 7, the last row partly empty
+        r.engine._max_groups = 7  # 2,104 triangles: 33 groups in rows of 7, the last row partly empty
         assert scene.num_triangles > 7 * 64 * 2
         np.testing.assert_array_equal(r.path_lengths(scene), want)

@@ -22,10 +22,11 @@ from .core.geometry import (
     ConeBeamGeometry,
     ParallelBeamGeometry,
     VectorGeometry,
-    VolumeGeometry,
     full_circle,
 )
+from .core.projections import Projections
 from .core.transform import Transform
+from .core.volume import VolumeGeometry
 from .gl.context import GLContext
 from .gl.voxelize import LabelVolume, voxelize
 from .physics.detector import Detector
@@ -56,6 +57,7 @@ __all__ = [
     "OpenCLError",
     "ParallelBeamGeometry",
     "PhysicsError",
+    "Projections",
     "Radiograph",
     "ReconstructionError",
     "RenderError",

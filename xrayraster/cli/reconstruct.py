@@ -9,7 +9,8 @@ import numpy as np
 
 from ..core.choices import FILTERS, RECONSTRUCTION_INPUTS, SCAN_KINDS
 from ..core.errors import ConfigError
-from ..io.scan_file import geometry_from_repr, read_scan_file
+from ..core.geometry import geometry_from_dict
+from ..io.scan_file import read_scan_file
 from ..io.tiff import read_tiff, write_quicklook, write_tiff
 from ..recon.fdk import fdk
 
@@ -47,7 +48,10 @@ def run(args) -> int:
         if "geometry" not in info:
             raise ConfigError(f"{args.geometry} has no 'geometry' and {args.projections} carries none in its metadata; "
                               "add the scan geometry to the scan file (docs/reconstruction.md)")
-        geometry = geometry_from_repr(info["geometry"])
+        if not isinstance(info["geometry"], dict):
+            raise ConfigError(f"{args.projections} carries its geometry in an older form (a Python repr); add the scan "
+                              f"geometry to {args.geometry} (docs/reconstruction.md)")
+        geometry = geometry_from_dict(info["geometry"], f"{args.projections} metadata geometry")
     kind = args.input or info.get("output", "lineint")
     if kind == "raw":
         raise ConfigError(f"{args.projections} holds the raw detector signal; render with --output lineint or "
@@ -61,8 +65,8 @@ def run(args) -> int:
         "quantity": "linear attenuation coefficient (FDK)" if geometry.beam == "cone" else "linear attenuation coefficient (FBP)",
         "units": vol.unit,
         "axes": "z, y, x",
-        "volume_geometry": repr(volume),
-        "geometry": repr(geometry),
+        "volume_geometry": volume.to_dict(),
+        "geometry": geometry.to_dict(),
         "filter": args.filter,
         "cutoff": args.cutoff,
         "scan": args.scan,

@@ -9,8 +9,9 @@ import numpy as np
 
 from ..core.choices import OVERLAP_MODES, RADIOGRAPH_OUTPUTS
 from ..core.errors import ConfigError
+from ..core.projections import Projections
 from ..io.scene_file import load_scene_file
-from ..io.tiff import write_quicklook, write_tiff
+from ..io.tiff import write_projections, write_quicklook
 from ..physics.detector import Detector
 from ..scene.materials import Material
 from ..simulate.renderer import Renderer
@@ -60,39 +61,20 @@ def _render_path_lengths(args) -> int:
         stack = np.stack([renderer.path_lengths(scene, v) for v in views])
         method, driver = renderer.last_method, renderer.gl.renderer
     seconds = time.perf_counter() - start
-    info = {
-        "quantity": "path length",
-        "units": "mm",
-        "axes": "view, material, row, col",
+    out = write_projections(args.out, Projections(stack, geometry[views], "path_length", "mm", {
         "materials": [_material_name(m) for m in scene.materials],
         "views": views,
-        "geometry": repr(geometry[views]),
         "supersampling": args.supersampling,
         "method": method,
         "renderer": driver,
         "scene_file": str(args.scene),
-    }
-    out = write_tiff(args.out, stack, axes="TCYX", pixel_size_mm=geometry.pixel_size, info=info)
+    }))
     png = write_quicklook(args.out.with_suffix(".png"), stack[0].sum(axis=0))
     print(
         f"{out}: {len(views)} view(s) × {len(scene.materials)} material(s) × {stack.shape[2]}×{stack.shape[3]} "
         f"px, max {stack.max():.4f} mm, {method} pass, {seconds:.2f} s on {driver}; quick-look {png}"
     )
     return 0
-
-
-QUANTITIES = {
-    "raw": "raw detector signal (flat-field-free: open beam, dark offset and noise included)",
-    "transmission": "transmission (raw - dark) / (flat - dark)",
-    "lineint": "line integral -ln(transmission)",
-}
-
-
-def radiograph_units(output: str, counting: bool) -> str:
-    """Units of a radiograph TIFF: raw signal in keV deposited (integrating) or counts; normalised ones are ratios."""
-    if output == "raw":
-        return "counts" if counting else "keV deposited"
-    return "1"  # transmission and its -ln are dimensionless
 
 
 def _render_radiographs(args) -> int:
@@ -119,16 +101,11 @@ def _render_radiographs(args) -> int:
     seconds = time.perf_counter() - start
     stack = np.stack([shot.image for shot in shots])
     starved = [shot.starved for shot in shots]
-    units = radiograph_units(output, detector.counting)
-    info = {
-        "quantity": QUANTITIES[output],
-        "output": output,
-        "units": units,
-        "axes": "view, row, col",
+    units = "1" if output != "raw" else "counts" if detector.counting else "keV deposited"
+    out = write_projections(args.out, Projections(stack, geometry[views], output, units, {
         "materials": [_material_name(m) for m in scene.materials],
         "material_compositions": [repr(m) for m in scene.materials],
         "views": views,
-        "geometry": repr(geometry[views]),
         "spectrum": spectrum.description,
         "spectrum_photons_per_mm2_at_1m": spectrum.total,
         "spectrum_bins": spectrum.n_bins,
@@ -142,8 +119,7 @@ def _render_radiographs(args) -> int:
         "method": method,
         "renderer": driver,
         "scene_file": str(args.scene),
-    }
-    out = write_tiff(args.out, stack, axes="TYX", pixel_size_mm=geometry.pixel_size, info=info)
+    }))
     png = write_quicklook(args.out.with_suffix(".png"), stack[0])
     extras = []
     if args.noise:

@@ -41,7 +41,7 @@ def run(args) -> int:
         "quantity": "label (0: background; else the label of the highest-priority object at the voxel centre)",
         "axes": "z, y, x",
         "labels": {str(k): v for k, v in sorted(names.items())},
-        "volume_geometry": repr(volume),
+        "volume_geometry": volume.to_dict(),
         "scene_file": str(args.scene),
     })
     if labels.fractions is not None:
@@ -49,7 +49,7 @@ def run(args) -> int:
         # ImageJ hyperstacks are ordered T Z C Y X: one channel per label.
         write_tiff(shares, labels.fractions.transpose(1, 0, 2, 3), axes="ZCYX", pixel_size_mm=(vy, vx), spacing_mm=vz,
                    info={"quantity": f"share of each voxel owned by each label, from {args.fractions}³ sub-voxel centres",
-                         "axes": "z, label, y, x", "channel_labels": list(labels.labels), "volume_geometry": repr(volume)})
+                         "axes": "z, label, y, x", "channel_labels": list(labels.labels), "volume_geometry": volume.to_dict()})
     png = write_quicklook(args.out.with_suffix(".png"), labels.data[labels.data.shape[0] // 2].astype(np.float32))
     counts = np.bincount(labels.data.ravel())
     present = ", ".join(f"{k}: {counts[k]}" for k in np.flatnonzero(counts) if k)

@@ -23,58 +23,45 @@ Conventions
 
 All geometry objects are small immutable values: ``eval(repr(g)) == g``, ``g[views]`` selects a
 subset of views, and construction validates every field with an error that names it.
+
+Dict form
+---------
+``g.to_dict()`` and ``type(g).from_dict(d)`` (or :func:`geometry_from_dict` for any kind) use one
+key set, the one of TOML scene files, JSON scan files and TIFF metadata; lengths mm, angles in
+degrees as in every config:
+
+* scan geometries: ``beam`` (``"cone"``, the default, or ``"parallel"``), ``detector_shape``
+  ``[rows, cols]`` (or one number), ``pixel_size`` ``[row, col]`` mm (or one), optional
+  ``detector_offset`` ``[row, col]`` mm; cone beams add ``source_to_origin`` and
+  ``source_to_detector``. Views: ``angles_deg`` (a list), or ``num_views`` (default 1) equally
+  spaced over ``arc_deg`` (default 360) from ``start_angle_deg`` (default 0), end point excluded.
+* vector geometries: ``beam``, ``detector_shape`` and ``vectors`` (one row of 12 numbers a view).
+* volumes: ``shape`` ``[z, y, x]``, ``voxel_size`` (one number or ``[z, y, x]``), optional ``offset``.
+
+``to_dict`` writes a circular scan's views as ``num_views`` (and ``start_angle_deg``) when they
+are exactly :func:`circular_arc`'s, which round-trips to the bit; other angle lists go out as
+``angles_deg`` and come back within one or two float64 ulps (degrees to radians).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
+from dataclasses import fields as dataclass_fields
 
 import numpy as np
 
+from . import fields
 from .choices import BEAMS, check_choice
-from .errors import GeometryError
+from .errors import ConfigError, GeometryError
+from .validate import finite, pair, positive_ints, set_field
 
 __all__ = [
     "ConeBeamGeometry",
     "ParallelBeamGeometry",
     "VectorGeometry",
-    "VolumeGeometry",
     "full_circle",
 ]
-
-
-def _finite(name: str, value: float, *, positive: bool = False) -> float:
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise GeometryError(f"{name} must be a number, got {value!r}") from None
-    if not math.isfinite(x):
-        raise GeometryError(f"{name} must be finite, got {x}")
-    if positive and x <= 0:
-        raise GeometryError(f"{name} must be > 0, got {x}")
-    return x
-
-
-def _pair(name: str, value, *, positive: bool) -> tuple[float, float]:
-    if np.ndim(value) == 0:
-        value = (value, value)
-    if len(value) != 2:
-        raise GeometryError(f"{name} must be a number or a (row, col) pair, got {value!r}")
-    return tuple(_finite(f"{name}[{i}]", v, positive=positive) for i, v in enumerate(value))
-
-
-def _shape(name: str, value, ndim: int) -> tuple[int, ...]:
-    if np.ndim(value) == 0:
-        value = (value,) * ndim
-    if len(value) != ndim:
-        raise GeometryError(f"{name} must have {ndim} entries, got {value!r}")
-    out = []
-    for i, n in enumerate(value):
-        if not np.isfinite(n) or int(n) != n or n < 1:
-            raise GeometryError(f"{name}[{i}] must be a positive integer, got {n!r}")
-        out.append(int(n))
-    return tuple(out)
 
 
 def _angles(value) -> tuple[float, ...]:
@@ -98,10 +85,15 @@ def _select(items: tuple, index) -> tuple:
     return tuple(items[int(i)] for i in idx)
 
 
+def circular_arc(num_views: int, start: float = 0.0, arc: float = 2 * math.pi) -> tuple[float, ...]:
+    """``num_views`` equally spaced angles (radians) over ``arc`` from ``start``, end point excluded."""
+    n = positive_ints("num_views", num_views, 1)[0]
+    return tuple(float(start + arc * k / n) for k in range(n))
+
+
 def full_circle(num_views: int, start: float = 0.0) -> tuple[float, ...]:
     """``num_views`` equally spaced angles (radians) over 2π, end point excluded."""
-    n = _shape("num_views", num_views, 1)[0]
-    return tuple(float(start + 2 * math.pi * k / n) for k in range(n))
+    return circular_arc(num_views, start)
 
 
 def _rot_z(theta: float) -> np.ndarray:
@@ -130,7 +122,24 @@ class _ScanGeometry:
         return f"{type(self).__name__}({args})"
 
     def _kwargs(self) -> dict:
-        return {f.name: getattr(self, f.name) for f in fields(self)}
+        return {f.name: getattr(self, f.name) for f in dataclass_fields(self)}
+
+    def to_dict(self) -> dict:
+        """The dict form (module docstring): JSON and TOML ready."""
+        out = {"beam": self.beam}
+        for name, value in self._kwargs().items():
+            if name != "angles":
+                out[name] = list(value) if isinstance(value, tuple) else value
+        out.update(_angles_to_dict(self.angles))
+        return out
+
+    @classmethod
+    def from_dict(cls, d: dict, where: str = "geometry"):
+        """A geometry of this class from its dict form; errors name ``where`` and the field."""
+        geometry = geometry_from_dict(d, where)
+        if not isinstance(geometry, cls):
+            raise ConfigError(f"{where}: describes a {type(geometry).__name__}, not a {cls.__name__}")
+        return geometry
 
     def _per_view(self) -> tuple:
         return getattr(self, self._per_view_field())
@@ -156,19 +165,19 @@ class ConeBeamGeometry(_ScanGeometry):
     detector_offset: tuple[float, float] = (0.0, 0.0)
 
     def __post_init__(self):
-        sod = _finite("source_to_origin", self.source_to_origin, positive=True)
-        sdd = _finite("source_to_detector", self.source_to_detector, positive=True)
+        sod = finite("source_to_origin", self.source_to_origin, positive=True)
+        sdd = finite("source_to_detector", self.source_to_detector, positive=True)
         if sdd <= sod:
             raise GeometryError(
                 f"source_to_detector ({sdd} mm) must exceed source_to_origin ({sod} mm): "
                 "the detector sits beyond the rotation axis"
             )
-        _set(self, "source_to_origin", sod)
-        _set(self, "source_to_detector", sdd)
-        _set(self, "detector_shape", _shape("detector_shape", self.detector_shape, 2))
-        _set(self, "pixel_size", _pair("pixel_size", self.pixel_size, positive=True))
-        _set(self, "angles", _angles(self.angles))
-        _set(self, "detector_offset", _pair("detector_offset", self.detector_offset, positive=False))
+        set_field(self, "source_to_origin", sod)
+        set_field(self, "source_to_detector", sdd)
+        set_field(self, "detector_shape", positive_ints("detector_shape", self.detector_shape, 2))
+        set_field(self, "pixel_size", pair("pixel_size", self.pixel_size, positive=True))
+        set_field(self, "angles", _angles(self.angles))
+        set_field(self, "detector_offset", pair("detector_offset", self.detector_offset, positive=False))
 
     @property
     def beam(self) -> str:
@@ -197,10 +206,10 @@ class ParallelBeamGeometry(_ScanGeometry):
     detector_offset: tuple[float, float] = (0.0, 0.0)
 
     def __post_init__(self):
-        _set(self, "detector_shape", _shape("detector_shape", self.detector_shape, 2))
-        _set(self, "pixel_size", _pair("pixel_size", self.pixel_size, positive=True))
-        _set(self, "angles", _angles(self.angles))
-        _set(self, "detector_offset", _pair("detector_offset", self.detector_offset, positive=False))
+        set_field(self, "detector_shape", positive_ints("detector_shape", self.detector_shape, 2))
+        set_field(self, "pixel_size", pair("pixel_size", self.pixel_size, positive=True))
+        set_field(self, "angles", _angles(self.angles))
+        set_field(self, "detector_offset", pair("detector_offset", self.detector_offset, positive=False))
 
     @property
     def beam(self) -> str:
@@ -233,7 +242,7 @@ class VectorGeometry(_ScanGeometry):
 
     def __post_init__(self):
         check_choice(self.beam, BEAMS, "beam", GeometryError)
-        _set(self, "detector_shape", _shape("detector_shape", self.detector_shape, 2))
+        set_field(self, "detector_shape", positive_ints("detector_shape", self.detector_shape, 2))
         vec = np.asarray(self.vectors, dtype=np.float64)
         if vec.ndim == 1 and vec.size == 12:
             vec = vec[None]
@@ -252,7 +261,7 @@ class VectorGeometry(_ScanGeometry):
                 raise GeometryError("vectors: the source lies in the detector plane")
         elif np.any(np.abs(np.einsum("ij,ij->i", normal, s)) <= 1e-9 * np.linalg.norm(s, axis=1) * np.linalg.norm(normal, axis=1)):
             raise GeometryError("vectors: the ray direction is parallel to the detector plane")
-        _set(self, "vectors", tuple(tuple(float(x) for x in row) for row in vec))
+        set_field(self, "vectors", tuple(tuple(float(x) for x in row) for row in vec))
 
     @staticmethod
     def _per_view_field() -> str:
@@ -266,48 +275,8 @@ class VectorGeometry(_ScanGeometry):
     def to_vec(self) -> "VectorGeometry":
         return self
 
-
-@dataclass(frozen=True, eq=True, repr=False)
-class VolumeGeometry:
-    """A voxel grid in the scanner frame: ``shape`` (z, y, x), ``voxel_size`` mm, ``offset`` mm.
-
-    Voxel centres along each axis are ``(index − (n − 1)/2)·voxel_size + offset``.
-    """
-
-    shape: tuple[int, int, int]
-    voxel_size: tuple[float, float, float]
-    offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
-
-    def __post_init__(self):
-        _set(self, "shape", _shape("shape", self.shape, 3))
-        vs = self.voxel_size
-        if np.ndim(vs) == 0:
-            vs = (vs,) * 3
-        if len(vs) != 3:
-            raise GeometryError(f"voxel_size must be a number or a (z, y, x) triple, got {vs!r}")
-        _set(self, "voxel_size", tuple(_finite(f"voxel_size[{i}]", x, positive=True) for i, x in enumerate(vs)))
-        if len(self.offset) != 3:
-            raise GeometryError(f"offset must be a (z, y, x) triple in mm, got {self.offset!r}")
-        _set(self, "offset", tuple(_finite(f"offset[{i}]", x) for i, x in enumerate(self.offset)))
-
-    def __repr__(self) -> str:
-        return f"VolumeGeometry(shape={self.shape!r}, voxel_size={self.voxel_size!r}, offset={self.offset!r})"
-
-    def axis_centres(self, axis: int) -> np.ndarray:
-        """Voxel-centre coordinates (mm) along ``axis`` (0 = z, 1 = y, 2 = x)."""
-        n = self.shape[axis]
-        return (np.arange(n) - (n - 1) / 2) * self.voxel_size[axis] + self.offset[axis]
-
-    @property
-    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """Outer corners (mm) of the grid as two ``(x, y, z)`` points."""
-        half = np.array(self.shape[::-1]) * np.array(self.voxel_size[::-1]) / 2
-        centre = np.array(self.offset[::-1])
-        return centre - half, centre + half
-
-
-def _set(obj, name: str, value) -> None:
-    object.__setattr__(obj, name, value)
+    def to_dict(self) -> dict:
+        return {"beam": self.beam, "detector_shape": list(self.detector_shape), "vectors": [list(row) for row in self.vectors]}
 
 
 def as_vector_geometry(geometry) -> VectorGeometry:
@@ -325,3 +294,73 @@ def detector_pixel_centres(vec: VectorGeometry, view: int) -> np.ndarray:
     c = np.arange(nc) - (nc - 1) / 2
     return d + r[:, None, None] * v + c[None, :, None] * u
 
+
+
+# ----------------------------------------------------------------------------- dict form
+
+
+def geometry_from_dict(d: dict, where: str = "geometry"):
+    """The scan geometry a dict describes (module docstring); errors name ``where`` and the field."""
+    d = fields.mapping(d, where)
+    beam = d.get("beam", "cone")
+    if beam not in BEAMS:
+        raise ConfigError(f"{where}: beam must be 'cone' or 'parallel', got {beam!r}")
+    shape = fields.one_or_pair(fields.required(d, "detector_shape", where), "detector_shape", where,
+                               "an integer or [rows, cols]", element=fields.integer, lo=1)
+    if "vectors" in d:
+        fields.only(d, {"beam", "detector_shape", "vectors"}, where)
+        rows = d["vectors"]
+        if not isinstance(rows, list) or not rows or not all(isinstance(r, list) for r in rows):
+            raise ConfigError(f"{where}: vectors must be a list of rows of 12 numbers, one a view, got {rows!r:.80}")
+        vectors = [fields.vector(r, f"vectors[{i}]", where, 12, "12 numbers (s|r, d, u, v)") for i, r in enumerate(rows)]
+        return fields.construct(VectorGeometry, where, beam=beam, detector_shape=shape, vectors=vectors)
+    if beam == "parallel":
+        for key in sorted({"source_to_origin", "source_to_detector"} & set(d)):
+            raise ConfigError(f"{where}: '{key}' has no meaning for beam = 'parallel' (there is no source point); "
+                              "drop it, or set beam = 'cone'")
+    fields.only(d, _SCAN_KEYS[beam], where)
+    common = dict(
+        detector_shape=shape,
+        pixel_size=fields.one_or_pair(fields.required(d, "pixel_size", where), "pixel_size", where,
+                                      "a number or [row, col] in mm", positive=True),
+        angles=_angles_from_dict(d, where),
+        detector_offset=fields.one_or_pair(d.get("detector_offset", 0.0), "detector_offset", where,
+                                           "a number or [row, col] in mm"),
+    )
+    if beam == "parallel":
+        return fields.construct(ParallelBeamGeometry, where, **common)
+    return fields.construct(
+        ConeBeamGeometry, where,
+        source_to_origin=fields.number(fields.required(d, "source_to_origin", where), "source_to_origin", where, positive=True),
+        source_to_detector=fields.number(fields.required(d, "source_to_detector", where), "source_to_detector", where,
+                                         positive=True),
+        **common,
+    )
+
+
+_ANGLE_KEYS = {"angles_deg", "num_views", "start_angle_deg", "arc_deg"}
+_CIRCULAR_KEYS = {"beam", "detector_shape", "pixel_size", "detector_offset", *_ANGLE_KEYS}
+_SCAN_KEYS = {"parallel": _CIRCULAR_KEYS, "cone": {*_CIRCULAR_KEYS, "source_to_origin", "source_to_detector"}}
+
+
+def _angles_from_dict(d: dict, where: str) -> tuple[float, ...]:
+    if "angles_deg" in d:
+        if "num_views" in d:
+            raise ConfigError(f"{where}: give either 'num_views' (full circle) or 'angles_deg', not both")
+        for key in sorted({"start_angle_deg", "arc_deg"} & set(d)):
+            raise ConfigError(f"{where}: '{key}' only applies to 'num_views', not to 'angles_deg'; "
+                              f"drop '{key}' and add it to the angles in 'angles_deg'")
+        degrees = fields.vector(d["angles_deg"], "angles_deg", where, None, "a non-empty array of angles in degrees")
+        return tuple(math.radians(a) for a in degrees)
+    start = fields.number(d.get("start_angle_deg", 0.0), "start_angle_deg", where)
+    arc = fields.number(d.get("arc_deg", 360.0), "arc_deg", where, positive=True)
+    count = fields.integer(d.get("num_views", 1), "num_views", where, 1)
+    return circular_arc(count, math.radians(start), 2 * math.pi if arc == 360.0 else math.radians(arc))
+
+
+def _angles_to_dict(angles: tuple[float, ...]) -> dict:
+    """``num_views`` (and ``start_angle_deg``) where that gives back these very angles, else ``angles_deg``."""
+    start = math.degrees(angles[0])
+    if circular_arc(len(angles), math.radians(start)) == angles:
+        return {"num_views": len(angles)} | ({"start_angle_deg": start} if start else {})
+    return {"angles_deg": [math.degrees(a) for a in angles]}

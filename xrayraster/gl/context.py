@@ -20,6 +20,7 @@ import moderngl
 
 from ..core.errors import GLContextError
 from ..core.shader_files import read_shader
+from .bindings import binding_defines
 
 REQUIRED_GL = 430  # SSBOs, compute shaders, indirect draws
 
@@ -180,10 +181,10 @@ _INCLUDE = re.compile(r'^#include "([^"]+)"\s*$', re.MULTILINE)
 
 
 def shader_source(name: str, defines: dict | None = None) -> str:
-    """GLSL text of ``shaders/<name>`` with ``#include "x"`` expanded and ``defines`` inserted."""
+    """GLSL text of ``shaders/<name>`` with ``#include "x"`` expanded, and ``defines`` and the binding
+    slots of :mod:`xrayraster.gl.bindings` inserted."""
     text = read_shader(name)
     text = _INCLUDE.sub(lambda m: read_shader(m.group(1)), text)
-    if defines:
-        head, _, body = text.partition("\n")  # '#version' must stay the first line
-        text = head + "\n" + "".join(f"#define {k} {v}\n" for k, v in defines.items()) + body
-    return text
+    defines = {**(defines or {}), **binding_defines()}
+    head, _, body = text.partition("\n")  # '#version' must stay the first line
+    return head + "\n" + "".join(f"#define {k} {v}\n" for k, v in defines.items()) + body

@@ -5,8 +5,8 @@
 How
 ---
 Each voxel column (x_i, y_j) is a ray along +z: together the columns are a parallel-beam "view"
-whose detector pixels are the volume's (x, y) voxel centres. The path-length renderer records
-every crossing of those rays with the scene's triangles (the same exact, watertight float32
+whose detector pixels are the volume's (x, y) voxel centres. The crossing engine of the path
+lengths (:mod:`xrayraster.gl.crossings`) records every crossing of those rays with the scene's triangles (the same exact, watertight float32
 test that makes the projections, ``shaders/ray.glsl``) in per-column lists, once per volume.
 ``shaders/voxelize_resolve.comp`` then sorts each column's crossings and sweeps them upward
 slice by slice: below a voxel centre each crossing moves its object's winding count by ±1 (the
@@ -36,11 +36,12 @@ import numpy as np
 
 from ..core.choices import VOXELIZE_METHODS, check_choice
 from ..core.errors import VoxelizeError
-from ..core.geometry import VectorGeometry, VolumeGeometry
+from ..core.geometry import VectorGeometry
 from ..core.memory import available_memory
+from ..core.volume import VolumeGeometry
 from ..scene.scene import Scene
 from .context import GLContext
-from .pathlengths import PathLengthRenderer
+from .crossings import CrossingEngine
 from .voxelize_stencil import voxelize_stencil
 
 SLAB_BYTES = 64 * 2**20  # label words resolved per pass (GL_MAX_SHADER_STORAGE_BLOCK_SIZE is 128 MiB on llvmpipe)
@@ -161,21 +162,25 @@ def _label_tile(scene: Scene, volume: VolumeGeometry, out: np.ndarray, gl: GLCon
         return
     slices = max(per_word, (slab_bytes // (4 * ny * nx)) * per_word)  # a multiple of per_word
     box_lo, box_hi = volume.bounds
-    with PathLengthRenderer(column_geometry(volume), overlap="resolve", context=gl) as renderer, renderer.gl.current():
-        # An object beside the tile, or wholly above or below it, adds no crossing that counts.
-        buffers = renderer.crossing_lists(scene, skip=lambda o: bool(np.any(o.mesh.bounds[0] > box_hi)
-                                                                     or np.any(o.mesh.bounds[1] < box_lo)))
-        t_first = float(z[0] - buffers.ref[2])  # t of slice 0, mm from the rays' origin plane
-        words = renderer.gl.ctx.buffer(reserve=4 * ny * nx * (slices // per_word))
-        words.bind_to_storage_buffer(7)
-        for k0 in range(first, last, slices):
-            count = min(slices, last - k0)
-            padded = -(-count // per_word) * per_word
-            renderer.resolve_kept_lists("voxelize_resolve.comp", {"LABELS_PER_WORD": per_word}, {
-                "u_size": (nx, ny), "u_t0": t_first + k0 * volume.voxel_size[0], "u_dt": volume.voxel_size[0],
-                "u_slices": padded})
-            raw = np.frombuffer(words.read(size=4 * ny * nx * padded // per_word), np.uint32)
-            unpacked = raw.view(out.dtype).reshape(padded // per_word, ny, nx, per_word)
-            out[k0 : k0 + count] = unpacked.transpose(0, 3, 1, 2).reshape(padded, ny, nx)[:count]
-        words.release()
-        renderer.empty_lists()
+    # An object beside the tile, or wholly above or below it, adds no crossing that counts.
+    def outside(o) -> bool:
+        return bool(np.any(o.mesh.bounds[0] > box_hi) or np.any(o.mesh.bounds[1] < box_lo))
+
+    engine = CrossingEngine(column_geometry(volume), gl)
+    with gl.current():
+        try:
+            uploaded = engine.upload(scene)
+            words = engine.scratch("output", 4 * ny * nx * (slices // per_word))
+            with engine.record_lists(uploaded, 0, engine.object_table(uploaded, 0, skip=outside)) as lists:
+                t_first = float(z[0] - lists.ref[2])  # t of slice 0, mm from the rays' origin plane
+                for k0 in range(first, last, slices):
+                    count = min(slices, last - k0)
+                    padded = -(-count // per_word) * per_word
+                    lists.resolve("voxelize_resolve.comp", {"LABELS_PER_WORD": per_word}, {
+                        "u_size": (nx, ny), "u_t0": t_first + k0 * volume.voxel_size[0], "u_dt": volume.voxel_size[0],
+                        "u_slices": padded}, {"output": words})
+                    raw = np.frombuffer(words.read(size=4 * ny * nx * padded // per_word), np.uint32)
+                    unpacked = raw.view(out.dtype).reshape(padded // per_word, ny, nx, per_word)
+                    out[k0 : k0 + count] = unpacked.transpose(0, 3, 1, 2).reshape(padded, ny, nx)[:count]
+        finally:
+            engine.release()

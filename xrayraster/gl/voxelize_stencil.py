@@ -20,7 +20,7 @@ import ctypes
 import numpy as np
 
 from ..core.errors import VoxelizeError
-from ..core.geometry import VolumeGeometry
+from ..core.volume import VolumeGeometry
 from ..scene.scene import Scene
 from .context import GLContext
 

@@ -1,5 +1,12 @@
 """Files: TOML scene files, JSON scan files, TIFF stacks and their metadata, quick-look PNGs."""
 
-from .tiff import read_tiff, read_tiff_info, write_quicklook, write_tiff
+from .tiff import (
+    read_projections,
+    read_tiff,
+    read_tiff_info,
+    write_projections,
+    write_quicklook,
+    write_tiff,
+)
 
-__all__ = ["read_tiff", "read_tiff_info", "write_quicklook", "write_tiff"]
+__all__ = ["read_projections", "read_tiff", "read_tiff_info", "write_projections", "write_quicklook", "write_tiff"]

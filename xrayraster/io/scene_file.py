@@ -9,9 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.choices import BEAMS, DETECTOR_MODES
+from ..core import fields
+from ..core.choices import DETECTOR_MODES
 from ..core.errors import ConfigError, MaterialError, PhysicsError, SpectrumError
-from ..core.geometry import ConeBeamGeometry, ParallelBeamGeometry, full_circle
+from ..core.geometry import ConeBeamGeometry, ParallelBeamGeometry, geometry_from_dict
 from ..core.transform import Transform
 from ..physics.detector import Detector
 from ..physics.spectrum import Spectrum
@@ -32,10 +33,6 @@ class SceneFile:
     detector: Detector | None = None
 
 
-_GEOMETRY_KEYS = {
-    "beam", "source_to_origin", "source_to_detector", "detector_shape", "pixel_size",
-    "detector_offset", "num_views", "angles_deg", "start_angle_deg",
-}
 _OBJECT_KEYS = {"name", "mesh", "material", "label", "priority", "unit_scale", "translate", "rotate_deg"}
 _PRIMITIVE_KEYS = {"box": {"box"}, "sphere": {"sphere", "subdivisions"}, "cylinder": {"cylinder", "height", "sections"}}
 _MATERIAL_KINDS = ("element", "formula", "mass_fractions")
@@ -58,7 +55,7 @@ def load_scene_file(path) -> SceneFile:
         raise ConfigError(f"{path}: no such scene file") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from None
-    _only(data, {"geometry", "objects", "materials", "source", "detector"}, f"{path}")
+    fields.only(data, {"geometry", "objects", "materials", "source", "detector"}, f"{path}")
     if "geometry" not in data:
         raise ConfigError(f"{path}: missing [geometry] table")
     if not isinstance(data["geometry"], dict):
@@ -80,10 +77,10 @@ def load_scene_file(path) -> SceneFile:
         _add_object(scene, spec, path.parent, where, materials)
     spectrum = None
     if "source" in data:
-        spectrum = _source(_table(data["source"], "source", f"{path}"), path.parent, f"{path} [source]")
+        spectrum = _source(fields.table(data["source"], "source", f"{path}"), path.parent, f"{path} [source]")
     detector = None
     if "detector" in data:
-        detector = _detector(_table(data["detector"], "detector", f"{path}"), materials, f"{path} [detector]")
+        detector = _detector(fields.table(data["detector"], "detector", f"{path}"), materials, f"{path} [detector]")
     return SceneFile(path, geometry, scene, materials, spectrum, detector)
 
 
@@ -93,8 +90,8 @@ def _add_object(scene: Scene, spec: dict, base: Path, where: str, materials: dic
         if not isinstance(name, str) or not name:
             raise ConfigError(f"{where}: name must be a non-empty string, got {name!r}")
         where = f"{where} ({name})"
-    _only(spec, _OBJECT_KEYS, where)
-    mesh, material = _required(spec, "mesh", where), _required(spec, "material", where)
+    fields.only(spec, _OBJECT_KEYS, where)
+    mesh, material = fields.required(spec, "mesh", where), fields.required(spec, "material", where)
     if isinstance(material, (list, dict)):
         raise ConfigError(f"{where}: material must be a name (a string), got {material!r}")
     if materials is not None:
@@ -110,122 +107,21 @@ def _add_object(scene: Scene, spec: dict, base: Path, where: str, materials: dic
         _mesh(mesh, base, where),
         material,
         name=name,
-        label=None if label is None else _integer(label, "label", where, 1, 65535),
-        priority=_number(spec.get("priority", 0), "priority", where),
-        unit_scale=_number(spec.get("unit_scale", 1.0), "unit_scale", where, positive=True),
+        label=None if label is None else fields.integer(label, "label", where, 1, 65535),
+        priority=fields.number(spec.get("priority", 0), "priority", where),
+        unit_scale=fields.number(spec.get("unit_scale", 1.0), "unit_scale", where, positive=True),
         transform=_placement(spec, where),
     )
-
-
-# ----------------------------------------------------------------------------- value checks
-# Each takes the value, the field's name and the place for the message, and returns the checked value.
-
-
-def _only(table: dict, allowed: set, where: str) -> None:
-    unknown = sorted(set(table) - allowed)
-    if unknown:
-        raise ConfigError(f"{where}: unknown key(s) {', '.join(unknown)}; allowed: {', '.join(sorted(allowed))}")
-
-
-def _required(table: dict, key: str, where: str):
-    if key not in table:
-        raise ConfigError(f"{where}: missing '{key}'")
-    return table[key]
-
-
-def _number(value, field: str, where: str, *, positive: bool = False, nonnegative: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ConfigError(f"{where}: {field} must be a number, got {value!r}")
-    if not math.isfinite(value):
-        raise ConfigError(f"{where}: {field} must be finite, got {value!r}")
-    if positive and value <= 0:
-        raise ConfigError(f"{where}: {field} must be > 0, got {value!r}")
-    if nonnegative and value < 0:
-        raise ConfigError(f"{where}: {field} must be >= 0, got {value!r}")
-    return float(value)
-
-
-def _string(value, field: str, where: str) -> str:
-    if not isinstance(value, str) or not value:
-        raise ConfigError(f"{where}: {field} must be a non-empty string, got {value!r}")
-    return value
-
-
-def _table(value, field: str, where: str) -> dict:
-    if not isinstance(value, dict):
-        raise ConfigError(f"{where}: {field} must be a table ([{field}]), got {value!r}")
-    return value
-
-
-def _integer(value, field: str, where: str, lo: int, hi: int | None = None) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or value < lo or (hi is not None and value > hi):
-        bounds = f">= {lo}" if hi is None else f"in [{lo}, {hi}]"
-        raise ConfigError(f"{where}: {field} must be an integer {bounds}, got {value!r}")
-    return value
-
-
-def _vector(value, field: str, where: str, length: int | None, form: str, *, element=_number, **limits) -> tuple:
-    """An array of exactly ``length`` values (any non-empty array if None), each checked by ``element``."""
-    if not isinstance(value, list) or not value or (length is not None and len(value) != length):
-        raise ConfigError(f"{where}: {field} must be {form}, got {value!r}")
-    return tuple(element(x, f"{field}[{i}]", where, **limits) for i, x in enumerate(value))
-
-
-def _one_or_pair(value, field: str, where: str, form: str, *, element=_number, **limits):
-    """One value (meaning both) or a ``[row, col]`` array of two."""
-    if isinstance(value, list):
-        return _vector(value, field, where, 2, form, element=element, **limits)
-    return element(value, field, where, **limits)
 
 
 # ----------------------------------------------------------------------------- tables
 
 
-def _geometry(g: dict, where: str):
-    _only(g, _GEOMETRY_KEYS, where)
-    beam = g.get("beam", "cone")
-    if beam not in BEAMS:
-        raise ConfigError(f"{where}: beam must be 'cone' or 'parallel', got {beam!r}")
-    if beam == "parallel":
-        for key in ("source_to_origin", "source_to_detector"):
-            if key in g:
-                raise ConfigError(
-                    f"{where}: '{key}' has no meaning for beam = 'parallel' (there is no source point); "
-                    f"drop it, or set beam = 'cone'"
-                )
-    if "angles_deg" in g:
-        if "num_views" in g:
-            raise ConfigError(f"{where}: give either 'num_views' (full circle) or 'angles_deg', not both")
-        if "start_angle_deg" in g:
-            raise ConfigError(
-                f"{where}: 'start_angle_deg' only applies to 'num_views', not to 'angles_deg'; "
-                "drop 'start_angle_deg' and add it to the angles in 'angles_deg'"
-            )
-        degrees = _vector(g["angles_deg"], "angles_deg", where, None, "a non-empty array of angles in degrees")
-        angles = [math.radians(a) for a in degrees]
-    else:
-        start = _number(g.get("start_angle_deg", 0.0), "start_angle_deg", where)
-        angles = full_circle(_integer(g.get("num_views", 1), "num_views", where, 1), math.radians(start))
-    common = dict(
-        detector_shape=_one_or_pair(
-            _required(g, "detector_shape", where), "detector_shape", where, "an integer or [rows, cols]",
-            element=_integer, lo=1,
-        ),
-        pixel_size=_one_or_pair(
-            _required(g, "pixel_size", where), "pixel_size", where, "a number or [row, col] in mm", positive=True
-        ),
-        angles=angles,
-        detector_offset=_one_or_pair(
-            g.get("detector_offset", 0.0), "detector_offset", where, "a number or [row, col] in mm"
-        ),
-    )
-    if beam == "parallel":
-        return ParallelBeamGeometry(**common)
-    return ConeBeamGeometry(
-        _number(_required(g, "source_to_origin", where), "source_to_origin", where, positive=True),
-        _number(_required(g, "source_to_detector", where), "source_to_detector", where, positive=True),
-        **common,
-    )
+def _geometry(g, where: str):
+    """The ``[geometry]`` table: the dict form of a cone or parallel scan (:mod:`xrayraster.core.geometry`)."""
+    if isinstance(g, dict) and "vectors" in g:
+        raise ConfigError(f"{where}: scene files take cone or parallel geometries; 'vectors' is for scan files")
+    return geometry_from_dict(g, where)
 
 
 def _mesh(spec, base: Path, where: str):
@@ -240,39 +136,39 @@ def _mesh(spec, base: Path, where: str):
     where = f"{where} mesh"
     kinds = set(_PRIMITIVE_KEYS) & set(spec)
     if len(kinds) != 1:
-        _only(spec, set().union(*_PRIMITIVE_KEYS.values()), where)
+        fields.only(spec, set().union(*_PRIMITIVE_KEYS.values()), where)
         raise ConfigError(f"{where}: a mesh primitive needs exactly one of box, sphere, cylinder")
     kind = kinds.pop()
-    _only(spec, _PRIMITIVE_KEYS[kind], where)
+    fields.only(spec, _PRIMITIVE_KEYS[kind], where)
     if kind == "box":
-        extents = _vector(spec["box"], "box", where, 3, "[x, y, z] edge lengths in mm", positive=True)
+        extents = fields.vector(spec["box"], "box", where, 3, "[x, y, z] edge lengths in mm", positive=True)
         return trimesh.creation.box(extents)
     if kind == "sphere":
         return trimesh.creation.icosphere(
-            subdivisions=_integer(spec.get("subdivisions", 4), "subdivisions", where, 0, _MAX_SUBDIVISIONS),
-            radius=_number(spec["sphere"], "sphere", where, positive=True),
+            subdivisions=fields.integer(spec.get("subdivisions", 4), "subdivisions", where, 0, _MAX_SUBDIVISIONS),
+            radius=fields.number(spec["sphere"], "sphere", where, positive=True),
         )
     return trimesh.creation.cylinder(
-        radius=_number(spec["cylinder"], "cylinder", where, positive=True),
-        height=_number(_required(spec, "height", where), "height", where, positive=True),
-        sections=_integer(spec.get("sections", 64), "sections", where, 3, _MAX_SECTIONS),
+        radius=fields.number(spec["cylinder"], "cylinder", where, positive=True),
+        height=fields.number(fields.required(spec, "height", where), "height", where, positive=True),
+        sections=fields.integer(spec.get("sections", 64), "sections", where, 3, _MAX_SECTIONS),
     )
 
 
 def _placement(spec: dict, where: str) -> Transform | None:
     if "translate" not in spec and "rotate_deg" not in spec:
         return None
-    rotate = _vector(spec.get("rotate_deg", [0, 0, 0]), "rotate_deg", where, 3, "[x, y, z] in degrees")
-    offset = _vector(spec.get("translate", [0, 0, 0]), "translate", where, 3, "[x, y, z] in mm")
+    rotate = fields.vector(spec.get("rotate_deg", [0, 0, 0]), "rotate_deg", where, 3, "[x, y, z] in degrees")
+    offset = fields.vector(spec.get("translate", [0, 0, 0]), "translate", where, 3, "[x, y, z] in mm")
     t = Transform()
     for axis, angle in zip(np.eye(3), rotate):
         t = Transform.rotation(axis, math.radians(angle)) @ t  # about x, then y, then z
     return Transform.translation(offset) @ t
 
 
-def _materials(table, where: str) -> dict[str, Material]:
-    table = _table(table, "materials", where.rsplit(" ", 1)[0])
-    return {name: _material(spec, name, f"{where[:-1]}.{name}]") for name, spec in table.items()}
+def _materials(specs, where: str) -> dict[str, Material]:
+    specs = fields.table(specs, "materials", where.rsplit(" ", 1)[0])
+    return {name: _material(spec, name, f"{where[:-1]}.{name}]") for name, spec in specs.items()}
 
 
 def _material(spec, name: str, where: str) -> Material:
@@ -282,7 +178,7 @@ def _material(spec, name: str, where: str) -> Material:
             f"{where}: must be a table such as {{ element = \"Al\" }}, {{ formula = \"H2O\", density = 1.0 }} "
             f"or {{ mass_fractions = {{ Fe = 0.98, C = 0.02 }}, density = 7.85 }}, got {spec!r}"
         )
-    _only(spec, _MATERIAL_KEYS, where)
+    fields.only(spec, _MATERIAL_KEYS, where)
     kinds = [k for k in _MATERIAL_KINDS if k in spec]
     if len(kinds) != 1:
         given = f"got {' and '.join(kinds)}" if kinds else "got none"
@@ -290,28 +186,28 @@ def _material(spec, name: str, where: str) -> Material:
     kind = kinds[0]
     density = spec.get("density")
     if density is not None:
-        density = _number(density, "density", where, positive=True)
+        density = fields.number(density, "density", where, positive=True)
     elif kind != "element":
         raise ConfigError(f"{where}: missing 'density' (g/cm³); a {kind} material needs one")
     try:
         if kind == "element":
-            return Material.element(_string(spec["element"], "element", where), density, name=name)
+            return Material.element(fields.string(spec["element"], "element", where), density, name=name)
         if kind == "formula":
-            return Material.from_formula(_string(spec["formula"], "formula", where), density, name=name)
+            return Material.from_formula(fields.string(spec["formula"], "formula", where), density, name=name)
         fractions = spec["mass_fractions"]
         if not isinstance(fractions, dict) or not fractions:
             raise ConfigError(
                 f"{where}: mass_fractions must be a table of element → mass fraction, "
                 f"e.g. {{ Fe = 0.98, C = 0.02 }}, got {fractions!r}"
             )
-        checked = {el: _number(w, f"mass_fractions.{el}", where, nonnegative=True) for el, w in fractions.items()}
+        checked = {el: fields.number(w, f"mass_fractions.{el}", where, nonnegative=True) for el, w in fractions.items()}
         return Material.from_mass_fractions(checked, density, name=name)
     except MaterialError as exc:
         raise ConfigError(f"{where}: {exc}") from None
 
 
 def _source(src: dict, base: Path, where: str) -> Spectrum:
-    _only(src, set().union(*_SOURCE_KINDS.values()), where)
+    fields.only(src, set().union(*_SOURCE_KINDS.values()), where)
     kinds = [k for k in _SOURCE_KINDS if k in src]
     if len(kinds) != 1:
         given = f"got {' and '.join(kinds)}" if kinds else "got none"
@@ -331,29 +227,29 @@ def _source(src: dict, base: Path, where: str) -> Spectrum:
             if not isinstance(filters, dict):
                 raise ConfigError(f"{where}: filters must be a table of material → thickness in mm, e.g. {{ Al = 2.0 }}, got {filters!r}")
             return Spectrum.from_tube(
-                kvp=_number(src["kvp"], "kvp", where, positive=True),
-                anode=_string(src.get("anode", "W"), "anode", where),
-                anode_angle_deg=_number(src.get("anode_angle_deg", 12.0), "anode_angle_deg", where, positive=True),
-                filters={m: _number(t, f"filters.{m}", where, nonnegative=True) for m, t in filters.items()},
-                mas=_number(src.get("mas", 1.0), "mas", where, positive=True),
-                bin_kev=_number(src.get("bin_kev", 0.5), "bin_kev", where, positive=True),
+                kvp=fields.number(src["kvp"], "kvp", where, positive=True),
+                anode=fields.string(src.get("anode", "W"), "anode", where),
+                anode_angle_deg=fields.number(src.get("anode_angle_deg", 12.0), "anode_angle_deg", where, positive=True),
+                filters={m: fields.number(t, f"filters.{m}", where, nonnegative=True) for m, t in filters.items()},
+                mas=fields.number(src.get("mas", 1.0), "mas", where, positive=True),
+                bin_kev=fields.number(src.get("bin_kev", 0.5), "bin_kev", where, positive=True),
             )
         if kind == "monochromatic_kev":
-            energy = _number(src["monochromatic_kev"], "monochromatic_kev", where, positive=True)
+            energy = fields.number(src["monochromatic_kev"], "monochromatic_kev", where, positive=True)
             if not ENERGY_MIN_KEV <= energy <= ENERGY_MAX_KEV:
                 raise ConfigError(
                     f"{where}: monochromatic_kev must be in [{ENERGY_MIN_KEV:g}, {ENERGY_MAX_KEV:g}] keV "
                     f"(the range of the attenuation tables), got {src['monochromatic_kev']!r}"
                 )
-            photons = _number(_required(src, "photons_per_mm2_at_1m", where), "photons_per_mm2_at_1m", where, positive=True)
+            photons = fields.number(fields.required(src, "photons_per_mm2_at_1m", where), "photons_per_mm2_at_1m", where, positive=True)
             return Spectrum.monochromatic(energy, photons)
-        return Spectrum.from_file(base / _string(src["spectrum_file"], "spectrum_file", where))
+        return Spectrum.from_file(base / fields.string(src["spectrum_file"], "spectrum_file", where))
     except SpectrumError as exc:
         raise ConfigError(f"{where}: {exc}") from None
 
 
 def _detector(spec: dict, materials: dict | None, where: str) -> Detector:
-    _only(spec, _DETECTOR_KEYS, where)
+    fields.only(spec, _DETECTOR_KEYS, where)
     mode = spec.get("mode", "integrating")
     if mode not in DETECTOR_MODES:
         raise ConfigError(f"{where}: mode must be 'integrating' or 'counting', got {mode!r}")
@@ -374,7 +270,7 @@ def _detector(spec: dict, materials: dict | None, where: str) -> Detector:
             f"{where}: scintillator must be a material name from [materials] or an inline table such as "
             f"{{ formula = \"CsI\", density = 4.51 }}, got {scintillator!r}"
         )
-    thickness = _number(spec.get("scintillator_mm", 0.0), "scintillator_mm", where, nonnegative=True)
+    thickness = fields.number(spec.get("scintillator_mm", 0.0), "scintillator_mm", where, nonnegative=True)
     if (scintillator is None) != (thickness == 0):
         raise ConfigError(f"{where}: give both scintillator and scintillator_mm > 0, or neither (every photon then counts)")
     try:
@@ -382,9 +278,9 @@ def _detector(spec: dict, materials: dict | None, where: str) -> Detector:
             mode=mode,
             scintillator=scintillator,
             scintillator_mm=thickness,
-            blur_sigma_px=_number(spec.get("blur_sigma_px", 0.0), "blur_sigma_px", where, nonnegative=True),
-            electronic_noise=_number(spec.get("electronic_noise", 0.0), "electronic_noise", where, nonnegative=True),
-            dark=_number(spec.get("dark", 0.0), "dark", where, nonnegative=True),
+            blur_sigma_px=fields.number(spec.get("blur_sigma_px", 0.0), "blur_sigma_px", where, nonnegative=True),
+            electronic_noise=fields.number(spec.get("electronic_noise", 0.0), "electronic_noise", where, nonnegative=True),
+            dark=fields.number(spec.get("dark", 0.0), "dark", where, nonnegative=True),
         )
     except PhysicsError as exc:  # pragma: no cover - every field is checked above
         raise ConfigError(f"{where}: {exc}") from None

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.files import atomic_write
+from ..core.projections import Projections
 
 
 def write_tiff(path, data: np.ndarray, *, axes: str, pixel_size_mm: tuple[float, float], info: dict,
@@ -47,6 +48,28 @@ def read_tiff_info(path) -> dict:
 
     with tifffile.TiffFile(path) as tif:
         return json.loads(tif.imagej_metadata["Info"])
+
+
+def write_projections(path, projections: Projections) -> Path:
+    """A :class:`~xrayraster.core.projections.Projections` stack as a float32 ImageJ TIFF with its
+    metadata (geometry, quantity, unit, provenance); :func:`read_projections` reads it back."""
+    axes = "TCYX" if projections.quantity == "path_length" else "TYX"
+    return write_tiff(path, projections.data, axes=axes, pixel_size_mm=pixel_size_mm(projections.geometry),
+                      info=projections.metadata())
+
+
+def read_projections(path) -> Projections:
+    """The stack :func:`write_projections` wrote (its metadata must carry the geometry)."""
+    data, info = read_tiff(path)
+    return Projections.from_metadata(data, info, str(path))
+
+
+def pixel_size_mm(geometry) -> tuple[float, float]:
+    """(row, col) pixel pitch in mm of a scan geometry's detector (its first view for a vector geometry)."""
+    if hasattr(geometry, "pixel_size"):
+        return geometry.pixel_size
+    u, v = geometry.array[0, 6:9], geometry.array[0, 9:12]
+    return float(np.linalg.norm(v)), float(np.linalg.norm(u))
 
 
 def write_quicklook(path, image: np.ndarray) -> Path:

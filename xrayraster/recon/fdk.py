@@ -25,8 +25,10 @@ import numpy as np
 
 from ..core.choices import RECONSTRUCTION_INPUTS, check_choice
 from ..core.errors import ReconstructionError
-from ..core.geometry import VolumeGeometry, as_vector_geometry
+from ..core.geometry import as_vector_geometry
 from ..core.memory import available_memory
+from ..core.projections import Projections
+from ..core.volume import VolumeGeometry
 from .fdk_weights import FDKViews, fdk_views
 from .opencl import CLContext
 from .ramp_filter import ramp_response
@@ -55,13 +57,16 @@ class Volume:
     unit: str = "1/cm"
 
 
-def fdk(projections, geometry, volume: VolumeGeometry, *, filter: str = "ram-lak", cutoff: float = 1.0,
-        scan: str = "auto", input: str = "lineint", context: CLContext | None = None, device: str | None = None,
-        memory_limit: int | None = None) -> Volume:
+def fdk(projections, geometry=None, volume: VolumeGeometry | None = None, *, filter: str = "ram-lak",
+        cutoff: float = 1.0, scan: str = "auto", input: str | None = None, context: CLContext | None = None,
+        device: str | None = None, memory_limit: int | None = None) -> Volume:
     """Reconstruct ``volume`` from ``projections`` (views, rows, cols) taken with ``geometry``.
 
-    * ``input``: ``"lineint"`` (−ln of the transmission, dimensionless: ∫μ dl with μ in mm⁻¹) or
-      ``"transmission"`` (I/I₀, logged here; every value must be > 0).
+    * ``projections``: an array with its ``geometry``, or a
+      :class:`~xrayraster.core.projections.Projections`, which carries its geometry and what it
+      holds (``fdk(p, volume=grid)``; a ``geometry`` or ``input`` given as well must agree).
+    * ``input``: ``"lineint"`` (the default for arrays: −ln of the transmission, dimensionless:
+      ∫μ dl with μ in mm⁻¹) or ``"transmission"`` (I/I₀, logged here; every value must be > 0).
     * ``filter``: ``ram-lak``, ``shepp-logan``, ``cosine``, ``hamming`` or ``hann``; ``cutoff``
       as a fraction of the Nyquist frequency (:mod:`xrayraster.recon.ramp_filter`).
     * ``scan``: ``auto``, ``full`` or ``short`` (Parker weights), see :mod:`xrayraster.recon.fdk_weights`.
@@ -71,6 +76,9 @@ def fdk(projections, geometry, volume: VolumeGeometry, *, filter: str = "ram-lak
 
     Returns a :class:`Volume` in cm⁻¹.
     """
+    projections, geometry, input = _unpack(projections, geometry, input)
+    if not isinstance(volume, VolumeGeometry):
+        raise ReconstructionError(f"volume must be a VolumeGeometry (the grid to reconstruct), got {type(volume).__name__}")
     vec = as_vector_geometry(geometry)
     stack = line_integrals(projections, vec, input)
     views = fdk_views(vec, volume, scan)
@@ -83,6 +91,22 @@ def fdk(projections, geometry, volume: VolumeGeometry, *, filter: str = "ram-lak
             ctx.release()
     data *= MM_TO_CM
     return Volume(data, volume)
+
+
+def _unpack(projections, geometry, input):
+    """(array, geometry, input) from an array and its geometry, or from a Projections."""
+    if not isinstance(projections, Projections):
+        if geometry is None:
+            raise ReconstructionError("give the scan geometry of the projections (or pass an xr.Projections)")
+        return projections, geometry, input or "lineint"
+    if geometry is not None and geometry != projections.geometry:
+        raise ReconstructionError("the geometry given differs from the one the Projections carry; pass one of them")
+    if projections.quantity not in RECONSTRUCTION_INPUTS:
+        raise ReconstructionError(f"these projections hold {projections.quantity!r}; reconstruct line integrals or "
+                                  "transmissions (a radiograph rendered with output='lineint' or 'transmission')")
+    if input is not None and input != projections.quantity:
+        raise ReconstructionError(f"input={input!r} but the Projections hold {projections.quantity!r}; drop input")
+    return projections.data, projections.geometry, projections.quantity
 
 
 def line_integrals(projections, geometry, input: str = "lineint") -> np.ndarray:

@@ -52,7 +52,8 @@ import numpy as np
 
 from ..core.choices import SCAN_KINDS, check_choice
 from ..core.errors import GeometryError
-from ..core.geometry import VolumeGeometry, as_vector_geometry
+from ..core.geometry import as_vector_geometry
+from ..core.volume import VolumeGeometry
 
 
 @dataclass(frozen=True)

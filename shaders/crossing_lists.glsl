@@ -1,0 +1,61 @@
+// Shared by the resolve passes: read one pixel's crossing list (recorded by crossing.glsl in
+// RESOLVE mode), sort it along the ray, and sweep it with the ownership rule. The lists stay in
+// place; the host empties them when the last resolve pass of a view is done.
+
+layout(local_size_x = 8, local_size_y = 8) in;
+layout(std430, binding = BINDING_HEADS) readonly buffer Heads { uint heads[]; };
+layout(std430, binding = BINDING_NODES) readonly buffer Nodes { uvec4 nodes[]; };  // t bits, object*2 + exit, next, -
+layout(std430, binding = BINDING_COUNTERS) buffer Counters { uint node_count; uint overflow_pixels; uint max_depth; };
+
+const uint END = 0xFFFFFFFFu;
+float ts[MAX_CROSSINGS];
+uint metas[MAX_CROSSINGS];
+uint active_rank[MAX_CROSSINGS];
+int active_count[MAX_CROSSINGS];
+int n_active = 0;
+
+// The list of `pixel` into ts/metas, sorted by t; returns how many crossings it holds, or -1
+// after counting an overflow when it holds more than MAX_CROSSINGS (the host then reruns the
+// pass with room for max_depth).
+int load_sorted(int pixel) {
+    uint node = heads[pixel];
+    int n = 0;
+    int depth = 0;
+    while (node != END) {
+        if (n < MAX_CROSSINGS) {
+            uvec4 e = nodes[node];
+            float t = uintBitsToFloat(e.x);
+            int k = n;  // insertion sort by t
+            while (k > 0 && ts[k - 1] > t) { ts[k] = ts[k - 1]; metas[k] = metas[k - 1]; k--; }
+            ts[k] = t;
+            metas[k] = e.y;
+            n++;
+            node = e.z;
+        } else {
+            node = nodes[node].z;
+        }
+        depth++;
+    }
+    if (depth > MAX_CROSSINGS) {
+        atomicAdd(overflow_pixels, 1u);
+        atomicMax(max_depth, uint(depth));
+        return -1;
+    }
+    return n;
+}
+
+// Crossing i enters (+1) or leaves (-1) its object; returns the rank of the object that owns
+// the space after it: the highest-ranked (priority, then insertion order) object the ray is
+// inside, or -1 for none.
+int sweep(int i) {
+    uint rank = metas[i] >> 1;  // object index = rank order
+    int step = (metas[i] & 1u) == 1u ? -1 : 1;  // exit leaves, entry enters
+    int j = 0;
+    while (j < n_active && active_rank[j] != rank) j++;
+    if (j == n_active) { active_rank[j] = rank; active_count[j] = 0; n_active++; }
+    active_count[j] += step;
+    int owner = -1;
+    for (int q = 0; q < n_active; q++)
+        if (active_count[q] > 0 && (owner < 0 || int(active_rank[q]) > owner)) owner = int(active_rank[q]);
+    return owner;
+}

@@ -1,0 +1,367 @@
+"""The crossing engine: every exact crossing of a view's rays with a scene's triangles.
+
+Every crossing of a pixel's ray (source → pixel centre, or the parallel ray) with a triangle is
+found by an exact, watertight float32 ray-triangle test (``shaders/ray.glsl``), never by the
+rasteriser's coverage rules, so its sub-pixel snapping never decides which triangle a ray hits.
+Distances are measured from a point beside the scene, not from the source
+(``xrayraster/gl/rays.py``), so the error does not grow with the source distance. Two passes
+find the candidate pixels:
+
+1. a compute pass over all triangles (``shaders/pathlength_small.comp``) tests a triangle whose
+   projected box holds at most ``small_triangle_pixels`` pixel centres against each of them,
+   and lists the larger triangles;
+2. the rasteriser draws each listed triangle grown by a margin (``shaders/grow.glsl``), and the
+   fragment stage runs the exact test for every pixel it covers.
+
+Dense meshes of sub-pixel triangles (most real scans) are cheaper in pass 1, whose cost is per
+triangle and parallel on every core; large triangles in pass 2, whose cost is per pixel.
+
+What a crossing does is ``shaders/crossing.glsl``'s: it adds its signed distance to a
+fixed-point accumulator per channel and pixel (:meth:`CrossingEngine.accumulate`), or it joins
+the pixel's list (:meth:`CrossingEngine.record_lists`), which a resolve pass then sorts and
+sweeps (:meth:`CrossingLists.resolve`): the path lengths' overlap pass and the voxelizer's label
+pass are two such resolve passes.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import moderngl
+import numpy as np
+
+from ..core.errors import RenderError, SceneError
+from ..core.geometry import VectorGeometry
+from ..core.memory import available_memory
+from ..scene.scene import Scene
+from .bindings import BINDINGS
+from .context import GLContext
+from .rays import view_rays
+
+log = logging.getLogger("xrayraster")
+
+_END = 0xFFFFFFFF
+NODE_BYTES = 16
+MIN_CROSSINGS = 16  # list room per pixel a resolve pass starts with; widened on overflow
+SMALL_TRIANGLE_PIXELS = 64  # measured: 32-128 equally fast on llvmpipe at 256²-2048²
+
+
+@dataclass
+class UploadedScene:
+    """A scene uploaded once (vertices relative to ``ref``) and reused for every view.
+
+    Objects are numbered by rank (priority, then insertion), so a resolve pass can compare
+    owners by index; every triangle carries its object's number.
+    """
+
+    scene: Scene
+    revision: int
+    ref: np.ndarray  # (3,) mm: the point all uploaded positions are relative to
+    triangles: moderngl.Buffer  # 3 vec4 per triangle: corners (mm, relative to ref), object in w
+    objects: moderngl.Buffer  # uvec4 per object: channel, drawn in this view, container channel + 1, label
+    large: moderngl.Buffer  # indirect draw command + indices of the triangles pass 2 draws
+    large_corners: moderngl.Buffer  # the six window-space corners pass 2 draws for each
+    ranked: list  # SceneObjects by rank
+    channels: np.ndarray  # channel of each object, by rank
+    num_channels: int
+    num_triangles: int
+    fixed_scale: float  # fixed-point units per mm of the sum accumulators
+    corners: np.ndarray  # (8, 3) bounding-box corners relative to ref
+
+    def release(self) -> None:
+        for buffer in (self.triangles, self.objects, self.large, self.large_corners):
+            buffer.release()
+
+
+class CrossingEngine:
+    """Records the crossings of one detector's rays (``geometry``, pixel for pixel) on ``gl``.
+
+    It borrows the context (its owner releases it) and keeps the uploaded scene and its scratch
+    buffers between views; call :meth:`release` when done. Use it inside ``gl.current()``.
+    """
+
+    def __init__(self, geometry: VectorGeometry, gl: GLContext, small_triangle_pixels: int = SMALL_TRIANGLE_PIXELS):
+        self.geometry = geometry
+        self.gl = gl
+        self.small_triangle_pixels = int(small_triangle_pixels)
+        # Vertices snap to 2^-bits px; 1/64 px is 8x that on the usual 8 sub-pixel bits.
+        self._snap_margin = max(1.0 / 64.0, 4.0 * 2.0 ** -int(gl.ctx.info.get("GL_SUBPIXEL_BITS", 4)))
+        self._max_groups = int(gl.ctx.info["GL_MAX_COMPUTE_WORK_GROUP_COUNT"][0])
+        self._scene: UploadedScene | None = None
+        self._buffers: dict[str, moderngl.Buffer] = {}
+        self._capacity = 0  # crossing nodes the node pool holds
+        self.max_crossings = MIN_CROSSINGS  # list room per pixel of the resolve passes
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.geometry.detector_shape
+
+    # -- scene ------------------------------------------------------------------------------
+
+    def upload(self, scene: Scene) -> UploadedScene:
+        """The scene on the GPU, uploaded again only when it changed (:attr:`Scene.revision`)."""
+        cached = self._scene
+        if cached is not None and cached.scene is scene and cached.revision == scene.revision:
+            return cached
+        if cached is not None:
+            cached.release()
+            self._scene = None
+        bounds = scene.bounds
+        ref = bounds.mean(axis=0)
+        materials = scene.materials
+        ranked = sorted(scene.objects, key=lambda o: o.rank)
+        soups = []
+        for number, o in enumerate(ranked):
+            soup = np.zeros((len(o.mesh.faces), 3, 4), np.float32)
+            soup[:, :, :3] = (o.mesh.vertices - ref).astype(np.float32)[o.mesh.faces]
+            soup[:, 0, 3] = np.array(number, np.uint32).view(np.float32)
+            soups.append(soup)
+        num_triangles = sum(len(t) for t in soups)
+        # Fixed point: the largest total (one bounding-box diagonal) must stay below 2^31 units.
+        diagonal = float(np.linalg.norm(bounds[1] - bounds[0]))
+        fixed_scale = 2.0 ** np.floor(np.log2(2.0**30 / diagonal))
+        ctx = self.gl.ctx
+        corners = np.array([[x, y, z] for x in bounds[:, 0] for y in bounds[:, 1] for z in bounds[:, 2]]) - ref
+        self._scene = UploadedScene(
+            scene=scene,
+            revision=scene.revision,
+            ref=ref,
+            triangles=ctx.buffer(np.concatenate(soups).tobytes()),
+            objects=ctx.buffer(reserve=16 * len(ranked)),
+            large=ctx.buffer(reserve=4 * (4 + num_triangles)),
+            large_corners=ctx.buffer(reserve=6 * 8 * num_triangles),
+            ranked=ranked,
+            channels=np.array([materials.index(o.material) for o in ranked], np.uint32),
+            num_channels=len(materials),
+            num_triangles=num_triangles,
+            fixed_scale=float(fixed_scale),
+            corners=corners,
+        )
+        return self._scene
+
+    def object_table(self, uploaded: UploadedScene, view: int, skip=None) -> np.ndarray:
+        """``(objects, 4)`` uint32 by rank: channel, drawn (0 when wholly behind the source or
+        ``skip(object)`` is true), 0 (a container's channel + 1, set by nested path lengths), label."""
+        table = np.zeros((len(uploaded.ranked), 4), np.uint32)
+        table[:, 0] = uploaded.channels
+        table[:, 1] = self._in_front_of_source(uploaded, view)
+        if skip is not None:
+            table[:, 1] *= [not skip(o) for o in uploaded.ranked]
+        table[:, 3] = [o.label for o in uploaded.ranked]
+        return table
+
+    def _in_front_of_source(self, uploaded: UploadedScene, view: int) -> np.ndarray:
+        """Per object (by rank): 0 when wholly behind a cone-beam source, which no ray reaches.
+
+        An object that straddles the source plane is refused: its path lengths are undefined.
+        """
+        active = np.ones(len(uploaded.ranked), np.uint32)
+        if self.geometry.beam != "cone":
+            return active
+        src, det, u, v = np.split(self.geometry.array[view], 4)
+        normal = np.cross(u, v)
+        normal *= np.sign(normal @ (det - src))
+        offset = (uploaded.ref - src) @ normal  # depth of X is (X - ref)·normal + offset
+        if np.all(uploaded.corners @ normal + offset > 0):
+            return active
+        for number, o in enumerate(uploaded.ranked):
+            depth = (o.mesh.vertices - uploaded.ref) @ normal + offset
+            if np.all(depth <= 0):
+                active[number] = 0
+            elif np.any(depth <= 0):
+                raise SceneError(
+                    f"object {o.name!r} crosses the source plane in view {view}: the source would sit inside "
+                    "or beside it. Move the object or the source (source_to_origin) so the object is in front of it."
+                )
+        if active.any() and np.allclose(uploaded.ref, src, rtol=0, atol=1e-9 * (1 + np.abs(src).max())):
+            raise SceneError(f"view {view}: the source sits at the centre of the scene's bounding box; move it")
+        return active
+
+    # -- the two candidate passes ----------------------------------------------------------------
+
+    def _record(self, uploaded: UploadedScene, view: int, table: np.ndarray, defines: dict, uniforms: dict) -> None:
+        """Pass 1 (compute: small triangles) then pass 2 (rasteriser: the large ones it listed)."""
+        uploaded.objects.write(table.astype(np.uint32).tobytes())
+        rays = view_rays(self.geometry, view, uploaded.ref)
+        rows, cols = self.shape
+        defines = {**defines, "MAX_SMALL_PIXELS": self.small_triangle_pixels}
+        small = self.gl.compute("pathlength_small.comp", defines)
+        large = self.gl.program("pathlength_large.vert", "pathlength_large.frag", defines)
+        uniforms = {
+            **uniforms,
+            "u_origin_num": rays.origin_num,
+            "u_origin_den": rays.origin_den,
+            "u_direction": rays.direction,
+            "u_world_to_pixel": rays.world_to_pixel,
+            "u_half_detector": (cols / 2.0, rows / 2.0),
+            "u_size": (cols, rows),
+            "u_num_triangles": uploaded.num_triangles,
+            "u_snap_margin": self._snap_margin,
+        }
+        for prog in (small, large):
+            set_uniforms(prog, uniforms)
+        for name in ("triangles", "objects", "large", "large_corners"):
+            getattr(uploaded, name).bind_to_storage_buffer(BINDINGS[name])
+        uploaded.large.write(np.array([0, 1, 0, 0], np.uint32).tobytes())  # empty draw command
+        groups = (uploaded.num_triangles + 63) // 64
+        wide = min(groups, self._max_groups)
+        small.run(wide, (groups + wide - 1) // wide)
+        self.gl.ctx.memory_barrier()
+        self._empty_framebuffer().use()
+        self._vao(large).render_indirect(uploaded.large, moderngl.TRIANGLES, count=1)
+        self.gl.ctx.memory_barrier()
+
+    # -- single pass: signed distances summed per pixel ------------------------------------------
+
+    def accumulate(self, uploaded: UploadedScene, view: int, table: np.ndarray) -> np.ndarray:
+        """Float32 ``(channels, rows, cols)``: per channel and pixel, the sum of each crossing's
+        signed distance (exits +t, entries −t; a nested object's also off its container's channel)."""
+        rows, cols = self.shape
+        size = 4 * uploaded.num_channels * rows * cols
+        acc = self.scratch("accumulators", size)
+        acc.clear(size)
+        acc.bind_to_storage_buffer(BINDINGS["accumulators"])
+        self._record(uploaded, view, table, {}, {"u_fixed_scale": uploaded.fixed_scale})
+        units = np.frombuffer(acc.read(size=size), dtype=np.int32)
+        out = units / uploaded.fixed_scale
+        return out.astype(np.float32).reshape(uploaded.num_channels, rows, cols)
+
+    # -- per-pixel crossing lists ------------------------------------------------------------------
+
+    def record_lists(self, uploaded: UploadedScene, view: int, table: np.ndarray) -> CrossingLists:
+        """Every crossing of ``view`` into per-pixel lists, growing the node pool until they fit.
+        Resolve passes read them through the returned handle; release it to empty them."""
+        rows, cols = self.shape
+        heads = self._buffers.get("heads")
+        if heads is None:
+            heads = self._buffers["heads"] = self.gl.ctx.buffer(np.full(rows * cols, _END, np.uint32).tobytes())
+            self._grow_node_pool(4 * rows * cols)
+        counters = self.scratch("counters", 16)
+        while True:
+            heads.bind_to_storage_buffer(BINDINGS["heads"])
+            self._buffers["nodes"].bind_to_storage_buffer(BINDINGS["nodes"])
+            counters.write(np.zeros(4, np.uint32).tobytes())
+            counters.bind_to_storage_buffer(BINDINGS["counters"])
+            self._record(uploaded, view, table, {"RESOLVE": 1}, {"u_capacity": self._capacity})
+            used = int(np.frombuffer(counters.read(size=4), np.uint32)[0])
+            if used <= self._capacity:
+                return CrossingLists(self, uploaded)
+            self._grow_node_pool(used)
+
+    def _resolve(self, uploaded: UploadedScene, shader: str, defines: dict, uniforms: dict, outputs: dict) -> None:
+        """The one overflow loop: run compute pass ``shader`` over the pixels with room for
+        MAX_CROSSINGS crossings a pixel; where a list holds more, the pass counts an overflow and
+        skips the pixel, and it runs again with room for the deepest list (kept for later views)."""
+        rows, cols = self.shape
+        counters = self._buffers["counters"]
+        while True:
+            prog = self.gl.compute(shader, {**defines, "MAX_CROSSINGS": self.max_crossings})
+            set_uniforms(prog, uniforms)
+            uploaded.objects.bind_to_storage_buffer(BINDINGS["objects"])
+            for name in ("heads", "nodes"):
+                self._buffers[name].bind_to_storage_buffer(BINDINGS[name])
+            counters.bind_to_storage_buffer(BINDINGS["counters"])
+            for name, buffer in outputs.items():
+                buffer.bind_to_storage_buffer(BINDINGS[name])
+            counters.write(np.zeros(4, np.uint32).tobytes())
+            prog.run((cols + 7) // 8, (rows + 7) // 8, 1)
+            self.gl.ctx.memory_barrier()
+            _, overflow, depth, _ = np.frombuffer(counters.read(), np.uint32)
+            if not overflow:
+                return
+            self.max_crossings = int(2 ** np.ceil(np.log2(depth)))
+            log.info("%s: %d pixels with up to %d crossings; running again", shader, overflow, depth)
+
+    def _empty_lists(self) -> None:
+        rows, cols = self.shape
+        self._buffers["heads"].write(np.full(rows * cols, _END, np.uint32).tobytes())
+
+    def _grow_node_pool(self, needed: int) -> None:
+        rows, cols = self.shape
+        capacity = int(needed * 1.25) + 1024
+        size = capacity * NODE_BYTES
+        free = available_memory()
+        if free is not None and size > free // 2:
+            raise RenderError(
+                f"the scene has {needed} ray-surface crossings in one view ({needed / (rows * cols):.0f} per pixel); "
+                f"storing them needs {size / 2**30:.1f} GiB. Reduce the detector size or supersampling, "
+                "or render without overlap resolution (overlap='sum') if the objects do not really overlap"
+            )
+        self.scratch("nodes", size)
+        self._capacity = capacity
+        self._empty_lists()  # a list cut short by the overflow is in the heads buffer
+
+    # -- GL objects kept between views -----------------------------------------------------------
+
+    def scratch(self, name: str, size: int) -> moderngl.Buffer:
+        """A buffer of at least ``size`` bytes, kept between views under ``name``."""
+        buffer = self._buffers.get(name)
+        if buffer is None or buffer.size < size:
+            if buffer is not None:
+                buffer.release()
+            buffer = self._buffers[name] = self.gl.ctx.buffer(reserve=size)
+        return buffer
+
+    def _empty_framebuffer(self) -> moderngl.Framebuffer:
+        if "framebuffer" not in self._buffers:
+            rows, cols = self.shape
+            self._buffers["framebuffer"] = self.gl.ctx.empty_framebuffer((cols, rows))
+        return self._buffers["framebuffer"]
+
+    def _vao(self, prog: moderngl.Program) -> moderngl.VertexArray:
+        key = f"vao{prog.glo}"
+        if key not in self._buffers:
+            self._buffers[key] = self.gl.ctx.vertex_array(prog, [])
+        return self._buffers[key]
+
+    def release(self) -> None:
+        with self.gl.current():
+            if self._scene is not None:
+                self._scene.release()
+                self._scene = None
+            for buffer in self._buffers.values():
+                buffer.release()
+            self._buffers = {}
+
+
+@dataclass
+class CrossingLists:
+    """The per-pixel crossing lists of one view, as :meth:`CrossingEngine.record_lists` left them.
+
+    ``resolve`` runs a resolve pass over them (any number of times: the lists stay), and
+    ``release`` (or leaving a ``with`` block) empties them for the next view.
+    """
+
+    engine: CrossingEngine
+    scene: UploadedScene
+
+    @property
+    def ref(self) -> np.ndarray:
+        """(3,) mm: crossing distances ``t`` are measured from this point's rays' origin plane."""
+        return self.scene.ref
+
+    def resolve(self, shader: str, defines: dict, uniforms: dict, outputs: dict[str, moderngl.Buffer]) -> None:
+        """Run ``shader`` (8×8 groups over the pixels; it includes ``crossing_lists.glsl``) with
+        ``outputs`` bound by their names in :data:`~xrayraster.gl.bindings.BINDINGS`."""
+        self.engine._resolve(self.scene, shader, defines, uniforms, outputs)
+
+    def release(self) -> None:
+        self.engine._empty_lists()
+
+    def __enter__(self) -> CrossingLists:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+
+def set_uniforms(prog, values: dict) -> None:
+    """Set the uniforms ``prog`` uses (the compiler drops the ones a stage does not read)."""
+    for name, value in values.items():
+        if name not in prog:
+            continue
+        if isinstance(value, np.ndarray):
+            prog[name].write(value.astype(np.float32).tobytes())
+        else:
+            prog[name].value = value
