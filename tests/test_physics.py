@@ -132,3 +132,35 @@ def test_bad_shapes_and_flat_are_refused():
         physics.expected_signal(np.zeros((1, 3, 3)), np.zeros((1, 4)), np.ones(3), np.ones(4), 1.0)
     with pytest.raises(physics.PhysicsError, match="flat field is not above the dark"):
         physics.normalise(np.ones((2, 2)), np.ones((2, 2)), 1.0, 0.5)
+
+
+def test_threads_is_the_pool_size_and_changes_no_byte(monkeypatch):
+    """threads=1 runs without a pool (a Dask worker's share), threads=3 asks a pool for 3 workers,
+    and both give the bytes of the default (every core), with and without noise."""
+    rng = np.random.default_rng(5)
+    lengths = rng.uniform(0, 30, (2, 300, 40))
+    mu = np.stack([mu_like(0.05), mu_like(0.02)])
+    factor = np.full((300, 40), 2.0)
+    sizes = []
+    pool = physics.ThreadPoolExecutor
+
+    def recording(workers):
+        sizes.append(workers)
+        return pool(workers)
+
+    def signals(threads):
+        expected = physics.expected_signal(lengths, mu, PHOTONS, ENERGIES, factor, threads)
+        noisy = physics.sampled_signal(lengths, mu, PHOTONS, np.ones_like(ENERGIES), ENERGIES, factor, False,
+                                       np.random.default_rng(9), threads)
+        return expected.tobytes() + noisy.tobytes()
+
+    monkeypatch.setattr(physics, "ThreadPoolExecutor", recording)
+    assert len(physics._row_blocks(len(ENERGIES), 300, 40)) >= 3  # enough blocks for 3 workers
+    default = signals(None)
+    sizes.clear()
+    assert signals(1) == default and sizes == []
+    assert signals(3) == default and sizes == [3, 3]
+    with pytest.raises(xr.PhysicsError, match="threads must be a positive integer"):
+        physics.expected_signal(lengths, mu, PHOTONS, ENERGIES, factor, 0)
+    with pytest.raises(xr.PhysicsError, match="threads must be a positive integer"):
+        xr.Renderer(xr.ParallelBeamGeometry(4, 1.0, [0.0]), threads=-2)

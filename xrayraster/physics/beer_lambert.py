@@ -73,10 +73,11 @@ def transmitted_photons(lengths: np.ndarray, mu: np.ndarray, photons: np.ndarray
     return exponent
 
 
-def expected_signal(lengths, mu, photons, weights, factor) -> np.ndarray:
+def expected_signal(lengths, mu, photons, weights, factor, threads: int | None = None) -> np.ndarray:
     """Noise-free detector signal ``(rows, cols)`` float64: Σ_b w_b · n_b(p).
 
-    Chunked over rows so the (bins × pixels) intermediate stays small.
+    Chunked over rows so the (bins × pixels) intermediate stays small; ``threads`` work on the
+    chunks (:func:`thread_count`).
     """
     lengths, mu, photons = _check(lengths, mu, photons)
     weights = np.asarray(weights, dtype=np.float64)
@@ -92,7 +93,7 @@ def expected_signal(lengths, mu, photons, weights, factor) -> np.ndarray:
         np.exp(exponent, out=exponent)
         out[rows] = np.tensordot(weighted, exponent, axes=1) * factor[rows]
 
-    for _ in _in_order(block, _row_blocks(mu.shape[1], *lengths.shape[1:])):  # blocks write disjoint rows
+    for _ in _in_order(block, _row_blocks(mu.shape[1], *lengths.shape[1:]), threads):  # blocks write disjoint rows
         pass
     return out
 
@@ -105,10 +106,21 @@ def _row_blocks(bins: int, rows: int, cols: int) -> list[slice]:
     return [slice(start, start + step) for start in range(0, rows, step)]
 
 
-def _in_order(work, items):
-    """``work(item)`` for each item on all cores (NumPy's ufuncs and BLAS release the GIL),
+def thread_count(threads: int | None) -> int:
+    """The spectral sum's thread count: ``threads``, or every core when None. A process pool or a
+    Dask worker that runs several simulations at once passes 1 (or its share) to avoid
+    oversubscribing the cores."""
+    if threads is None:
+        return os.cpu_count() or 1
+    if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
+        raise PhysicsError(f"threads must be a positive integer (or None for every core), got {threads!r}")
+    return threads
+
+
+def _in_order(work, items, threads: int | None):
+    """``work(item)`` for each item on ``threads`` threads (NumPy's ufuncs and BLAS release the GIL),
     yielding results in order, at most two per thread ahead of the consumer (bounded memory)."""
-    threads = min(len(items), os.cpu_count() or 1)
+    threads = min(len(items), thread_count(threads))
     if threads <= 1:
         yield from map(work, items)
         return
@@ -128,7 +140,8 @@ def _in_order(work, items):
 EXACT_BELOW_PHOTONS = 1000.0
 
 
-def sampled_signal(lengths, mu, photons, efficiency, energies, factor, counting: bool, rng) -> np.ndarray:
+def sampled_signal(lengths, mu, photons, efficiency, energies, factor, counting: bool, rng,
+                   threads: int | None = None) -> np.ndarray:
     """One noisy realisation ``(rows, cols)`` float64 of the detected signal.
 
     Counting: Poisson(Σ_b η_b n_b), one draw per pixel (a sum of independent Poisson variables
@@ -140,7 +153,7 @@ def sampled_signal(lengths, mu, photons, efficiency, energies, factor, counting:
     efficiency = np.asarray(efficiency, dtype=np.float64)
     energies = np.asarray(energies, dtype=np.float64)
     if counting:
-        mean = expected_signal(lengths, mu, photons, efficiency, factor)
+        mean = expected_signal(lengths, mu, photons, efficiency, factor, threads)
         return rng.poisson(mean).astype(np.float64)
     factor = np.broadcast_to(np.asarray(factor, dtype=np.float64), lengths.shape[1:])
     out = np.empty(lengths.shape[1:])
@@ -154,7 +167,7 @@ def sampled_signal(lengths, mu, photons, efficiency, energies, factor, counting:
 
     # Draws happen block after block in row order, so the bytes depend on the seed only.
     blocks = _row_blocks(mu.shape[1], *lengths.shape[1:])
-    for rows, (mean, spread, few, detected_few) in zip(blocks, _in_order(moments, blocks)):
+    for rows, (mean, spread, few, detected_few) in zip(blocks, _in_order(moments, blocks, threads)):
         chunk = mean + spread * rng.standard_normal(mean.shape)
         if few.any():
             chunk[few] = energies @ rng.poisson(detected_few)

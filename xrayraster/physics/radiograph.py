@@ -50,14 +50,15 @@ BIN_TOLERANCE = 1e-6
 
 
 def radiograph(lengths, materials, spectrum, detector: Detector, factor, *, output="lineint", noise=False, rng=None,
-               bin_tolerance: float = BIN_TOLERANCE) -> Radiograph:
+               bin_tolerance: float = BIN_TOLERANCE, threads: int | None = None) -> Radiograph:
     """The radiograph of one view.
 
     ``lengths``: ``(channels, rows, cols)`` mm, channels in ``materials`` order; ``spectrum``:
     photons per mm² at 1 m per bin (:class:`~xrayraster.Spectrum`); ``factor``: per-pixel photon
     factor (:func:`~xrayraster.physics.beer_lambert.pixel_photon_factor`); ``noise``: draw quantum noise
     (and the detector's electronic noise) from ``rng`` (a ``numpy.random.Generator``);
-    ``bin_tolerance``: see :data:`BIN_TOLERANCE` (0 keeps every non-empty bin).
+    ``bin_tolerance``: see :data:`BIN_TOLERANCE` (0 keeps every non-empty bin); ``threads``: of the
+    spectral sum (default every core; :func:`~xrayraster.physics.beer_lambert.thread_count`).
     """
     check_choice(output, RADIOGRAPH_OUTPUTS, "output", PhysicsError)
     if noise and rng is None:
@@ -68,9 +69,10 @@ def radiograph(lengths, materials, spectrum, detector: Detector, factor, *, outp
     mu = attenuation_table(materials, energies)
     weights = detector.weights(energies)
     if noise:
-        quantum = beer_lambert.sampled_signal(lengths, mu, photons, detector.efficiency(energies), energies, factor, detector.counting, rng)
+        quantum = beer_lambert.sampled_signal(lengths, mu, photons, detector.efficiency(energies), energies, factor,
+                                              detector.counting, rng, threads)
     else:
-        quantum = beer_lambert.expected_signal(lengths, mu, photons, weights, factor)
+        quantum = beer_lambert.expected_signal(lengths, mu, photons, weights, factor, threads)
     raw = detector.read_out(quantum, rng if noise else None)
     if output == "raw":
         return Radiograph(raw.astype(np.float32), output, 0, len(energies), dropped)

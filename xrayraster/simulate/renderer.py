@@ -7,14 +7,22 @@ import numpy as np
 
 from ..core.errors import RenderError
 from ..gl.pathlengths import PathLengthRenderer
-from ..physics.beer_lambert import pixel_photon_factor
+from ..physics.beer_lambert import pixel_photon_factor, thread_count
 from ..physics.detector import Detector
 from ..physics.radiograph import Radiograph, radiograph
 from ..scene.scene import Scene
 
 
 class Renderer(PathLengthRenderer):
-    """Path lengths (:class:`~xrayraster.gl.pathlengths.PathLengthRenderer`) and radiographs for a scan geometry."""
+    """Path lengths (:class:`~xrayraster.gl.pathlengths.PathLengthRenderer`, whose options it
+    takes) and radiographs for a scan geometry. ``threads``: how many threads the spectral sum of
+    :meth:`project` uses (default every core); a process pool or Dask worker running several
+    renderers at once gives each its share, so they do not oversubscribe the cores.
+    """
+
+    def __init__(self, geometry, *, threads: int | None = None, **options):
+        self.threads = thread_count(threads)  # checked before a GL context is made
+        super().__init__(geometry, **options)
 
     def project(self, scene: Scene, spectrum, view: int = 0, *, detector: Detector | None = None,
                 output: str = "lineint", noise: bool = False, seed: int | None = None) -> Radiograph:
@@ -32,4 +40,4 @@ class Renderer(PathLengthRenderer):
         rng = np.random.default_rng([int(seed), view]) if noise else None
         factor = pixel_photon_factor(self.vector_geometry, view)
         return radiograph(lengths, scene.materials, spectrum, detector or Detector(), factor, output=output,
-                          noise=noise, rng=rng)
+                          noise=noise, rng=rng, threads=self.threads)
