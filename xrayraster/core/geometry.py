@@ -1,4 +1,5 @@
-"""Scan and volume geometry: the one module that defines xrayraster's frames and units.
+"""Scan geometry: the one module that defines xrayraster's frames and units (the voxel grid is
+:mod:`xrayraster.core.volume`).
 
 Every stage (renderer, reconstruction, voxelizer) reads these objects, so a label volume and
 its reconstruction line up by construction.
