@@ -142,6 +142,13 @@ class _ScanGeometry:
             raise ConfigError(f"{where}: describes a {type(geometry).__name__}, not a {cls.__name__}")
         return geometry
 
+    def _check_circular_fields(self) -> None:
+        """The fields cone and parallel scans share, checked and stored in canonical form."""
+        set_field(self, "detector_shape", positive_ints("detector_shape", self.detector_shape, 2))
+        set_field(self, "pixel_size", pair("pixel_size", self.pixel_size, positive=True))
+        set_field(self, "angles", _angles(self.angles))
+        set_field(self, "detector_offset", pair("detector_offset", self.detector_offset, positive=False))
+
     def _per_view(self) -> tuple:
         return getattr(self, self._per_view_field())
 
@@ -175,10 +182,7 @@ class ConeBeamGeometry(_ScanGeometry):
             )
         set_field(self, "source_to_origin", sod)
         set_field(self, "source_to_detector", sdd)
-        set_field(self, "detector_shape", positive_ints("detector_shape", self.detector_shape, 2))
-        set_field(self, "pixel_size", pair("pixel_size", self.pixel_size, positive=True))
-        set_field(self, "angles", _angles(self.angles))
-        set_field(self, "detector_offset", pair("detector_offset", self.detector_offset, positive=False))
+        self._check_circular_fields()
 
     @property
     def beam(self) -> str:
@@ -207,10 +211,7 @@ class ParallelBeamGeometry(_ScanGeometry):
     detector_offset: tuple[float, float] = (0.0, 0.0)
 
     def __post_init__(self):
-        set_field(self, "detector_shape", positive_ints("detector_shape", self.detector_shape, 2))
-        set_field(self, "pixel_size", pair("pixel_size", self.pixel_size, positive=True))
-        set_field(self, "angles", _angles(self.angles))
-        set_field(self, "detector_offset", pair("detector_offset", self.detector_offset, positive=False))
+        self._check_circular_fields()
 
     @property
     def beam(self) -> str:
@@ -288,7 +289,7 @@ def as_vector_geometry(geometry) -> VectorGeometry:
 
 
 def detector_pixel_centres(vec: VectorGeometry, view: int) -> np.ndarray:
-    """Float64 ``(rows, cols, 3)`` pixel-centre positions (mm) of one view; a test reference."""
+    """Float64 ``(rows, cols, 3)`` pixel-centre positions (mm) of one view: the detector convention written out."""
     s, d, u, v = np.split(vec.array[view], 4)
     nr, nc = vec.detector_shape
     r = np.arange(nr) - (nr - 1) / 2
