@@ -109,3 +109,41 @@ def convex_chord(origins, dirs, vertices, faces):
         leave = np.where(nd > 0, np.minimum(leave, t), leave)
         leave = np.where((nd == 0) & (dist < 0), -np.inf, leave)
     return np.maximum(leave - enter, 0.0)
+
+
+def box_interval(origins, dirs, centre, rotation, half):
+    """(enter, leave) ray parameters of an oriented box (slab method), enter clipped to the half-line
+    (t ≥ 0); a miss has leave ≤ enter. ``rotation``'s columns are the box axes."""
+    o = (origins - np.asarray(centre, np.float64)) @ rotation
+    d = dirs @ rotation
+    half = np.asarray(half, np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1 = (-half - o) / d
+        t2 = (half - o) / d
+    inside = np.abs(o) <= half
+    lo = np.where(d == 0, np.where(inside, -np.inf, np.inf), np.minimum(t1, t2))
+    hi = np.where(d == 0, np.where(inside, np.inf, -np.inf), np.maximum(t1, t2))
+    return np.maximum(lo.max(axis=-1), 0.0), hi.min(axis=-1)
+
+
+def convex_interval(origins, dirs, vertices, faces, chunk: int = 2048):
+    """(enter, leave) ray parameters of a convex polyhedron with outward-wound faces (the
+    intersection of its face half-spaces), float64, enter clipped to t ≥ 0; a miss has leave ≤ enter.
+    ``origins``/``dirs`` (n, 3)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces)
+    a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
+    normals = np.cross(b - a, c - a)
+    offsets = np.einsum("ij,ij->i", normals, a)
+    enter = np.zeros(len(origins))
+    leave = np.full(len(origins), np.inf)
+    for start in range(0, len(normals), chunk):
+        n, h = normals[start : start + chunk], offsets[start : start + chunk]
+        nd = dirs @ n.T  # (rays, faces)
+        dist = h[None, :] - origins @ n.T
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = dist / nd
+        enter = np.maximum(enter, np.where(nd < 0, t, -np.inf).max(axis=1))
+        leave = np.minimum(leave, np.where(nd > 0, t, np.inf).min(axis=1))
+        leave = np.where(((nd == 0) & (dist < 0)).any(axis=1), -np.inf, leave)
+    return enter, leave

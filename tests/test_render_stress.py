@@ -35,6 +35,7 @@ def test_micrometre_plate_with_source_at_10_m(render):
     assert np.abs(got - exact).max() <= 2e-5  # relative error of a thin plate's chord ~1e-2 at worst
 
 
+@pytest.mark.slow
 def test_million_triangle_sphere_is_bracketed_by_its_sag(render):
     """1.3 M triangles: each chord lies between those of the circumscribed and inscribed spheres."""
     radius = 10.0
@@ -119,6 +120,7 @@ def test_degenerate_triangles_and_flipped_winding(render):
         assert np.abs(got - exact).max() <= 1e-4
 
 
+@pytest.mark.slow
 def test_a_thousand_random_orientations(gl):
     """1000 random scanner poses around a cube (exact) and a non-convex annulus (bounded).
 
