@@ -2,8 +2,9 @@
 
 Everything here is plain float64 NumPy, computed once per reconstruction from a scan geometry
 (any :class:`~xrayraster.core.geometry.VectorGeometry`, so tilted or misaligned scanners too) and a
-:class:`~xrayraster.core.geometry.VolumeGeometry`. The OpenCL kernels and the NumPy reference of the
-tests both read these arrays, so they implement the same algorithm.
+:class:`~xrayraster.core.volume.VolumeGeometry`. The OpenCL kernels read these arrays; the float64
+reference the tests compare them with (``references/fdk.py``) derives its own from the same
+formulas, so a wrong weight here fails those tests.
 
 The algorithm (Feldkamp, Davis & Kress 1984, written for a general flat detector)
 ----------------------------------------------------------------------------------
@@ -119,17 +120,6 @@ def fdk_views(geometry, volume: VolumeGeometry, scan: str = "auto") -> FDKViews:
     matrices = _projection_matrices(s, d, u, v, normal, depth, cone, volume, (rows, cols))
     return FDKViews(vec.beam, (rows, cols), a, depth, redundancy, float(pitch[0]), matrices, scale,
                     "full" if full else "short", displaced)
-
-
-def cosine_weights(views: FDKViews, view: int) -> np.ndarray:
-    """``(rows, cols)`` cosine pre-weights ``D / |p − s|`` of one view (ones for parallel beams)."""
-    rows, cols = views.detector_shape
-    if views.beam != "cone":
-        return np.ones((rows, cols))
-    s, d, u, v = np.split(views.vectors[view], 4)
-    r = (np.arange(rows) - (rows - 1) / 2)[:, None, None]
-    c = (np.arange(cols) - (cols - 1) / 2)[None, :, None]
-    return views.depth[view] / np.linalg.norm(d + c * u + r * v - s, axis=-1)
 
 
 def _view_angles(s: np.ndarray, cone: bool) -> np.ndarray:
