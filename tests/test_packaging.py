@@ -24,3 +24,11 @@ def test_every_shader_file_is_package_data():
 def test_console_script_and_readme():
     assert PYPROJECT["project"]["scripts"]["xrayraster"] == "xrayraster.cli:main"
     assert (ROOT / PYPROJECT["project"]["readme"]).is_file()
+
+
+def test_every_subpackage_is_shipped():
+    """A stage subpackage missing from the list installs a package that fails on import."""
+    listed = set(PYPROJECT["tool"]["setuptools"]["packages"])
+    found = {".".join(p.parent.relative_to(ROOT).parts) for p in (ROOT / "xrayraster").rglob("__init__.py")}
+    assert found <= listed, f"subpackages the wheel would lack: {sorted(found - listed)}; add them to packages"
+    assert "xrayraster.shaders" in listed

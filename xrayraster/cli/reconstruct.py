@@ -11,7 +11,7 @@ from ..core.choices import FILTERS, RECONSTRUCTION_INPUTS, SCAN_KINDS
 from ..core.errors import ConfigError
 from ..core.geometry import geometry_from_dict
 from ..io.scan_file import read_scan_file
-from ..io.tiff import read_tiff, write_quicklook, write_tiff
+from ..io.tiff import read_tiff, write_quicklook, write_volume
 from ..recon.fdk import fdk
 
 
@@ -61,11 +61,9 @@ def run(args) -> int:
               device=args.device)
     seconds = time.perf_counter() - start
     vz, vy, vx = volume.voxel_size
-    out = write_tiff(args.out, vol.data, axes="ZYX", pixel_size_mm=(vy, vx), spacing_mm=vz, info={
+    out = write_volume(args.out, vol.data, volume, {
         "quantity": "linear attenuation coefficient (FDK)" if geometry.beam == "cone" else "linear attenuation coefficient (FBP)",
         "units": vol.unit,
-        "axes": "z, y, x",
-        "volume_geometry": volume.to_dict(),
         "geometry": geometry.to_dict(),
         "filter": args.filter,
         "cutoff": args.cutoff,

@@ -10,7 +10,7 @@ import numpy as np
 from ..gl.voxelize import voxelize
 from ..io.scan_file import read_scan_file
 from ..io.scene_file import load_scene_file
-from ..io.tiff import write_quicklook, write_tiff
+from ..io.tiff import write_quicklook, write_volume
 
 
 def add_parser(subparsers) -> None:
@@ -37,19 +37,17 @@ def run(args) -> int:
     for o in loaded.scene.objects:
         names.setdefault(o.label, []).append(o.name)
     vz, vy, vx = volume.voxel_size
-    out = write_tiff(args.out, labels.data, axes="ZYX", pixel_size_mm=(vy, vx), spacing_mm=vz, info={
+    out = write_volume(args.out, labels.data, volume, {
         "quantity": "label (0: background; else the label of the highest-priority object at the voxel centre)",
-        "axes": "z, y, x",
         "labels": {str(k): v for k, v in sorted(names.items())},
-        "volume_geometry": volume.to_dict(),
         "scene_file": str(args.scene),
     })
     if labels.fractions is not None:
         shares = args.out.with_name(f"{args.out.stem}_fractions.tif")
         # ImageJ hyperstacks are ordered T Z C Y X: one channel per label.
-        write_tiff(shares, labels.fractions.transpose(1, 0, 2, 3), axes="ZCYX", pixel_size_mm=(vy, vx), spacing_mm=vz,
-                   info={"quantity": f"share of each voxel owned by each label, from {args.fractions}³ sub-voxel centres",
-                         "axes": "z, label, y, x", "channel_labels": list(labels.labels), "volume_geometry": volume.to_dict()})
+        write_volume(shares, labels.fractions.transpose(1, 0, 2, 3), volume, channels="label", info={
+            "quantity": f"share of each voxel owned by each label, from {args.fractions}³ sub-voxel centres",
+            "channel_labels": list(labels.labels)})
     png = write_quicklook(args.out.with_suffix(".png"), labels.data[labels.data.shape[0] // 2].astype(np.float32))
     counts = np.bincount(labels.data.ravel())
     present = ", ".join(f"{k}: {counts[k]}" for k in np.flatnonzero(counts) if k)

@@ -6,8 +6,9 @@ How
 ---
 Each voxel column (x_i, y_j) is a ray along +z: together the columns are a parallel-beam "view"
 whose detector pixels are the volume's (x, y) voxel centres. The crossing engine of the path
-lengths (:mod:`xrayraster.gl.crossings`) records every crossing of those rays with the scene's triangles (the same exact, watertight float32
-test that makes the projections, ``shaders/ray.glsl``) in per-column lists, once per volume.
+lengths (:mod:`xrayraster.gl.crossings`) records every crossing of those rays with the scene's
+triangles (the same exact, watertight float32 test that makes the projections,
+``shaders/ray.glsl``) in per-column lists, once per volume.
 ``shaders/voxelize_resolve.comp`` then sorts each column's crossings and sweeps them upward
 slice by slice: below a voxel centre each crossing moves its object's winding count by ±1 (the
 count a stencil buffer keeps in stencil-based voxelizers), the centre is inside the objects

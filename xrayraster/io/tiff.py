@@ -9,6 +9,7 @@ import numpy as np
 
 from ..core.files import atomic_write
 from ..core.projections import Projections
+from ..core.volume import VolumeGeometry
 
 
 def write_tiff(path, data: np.ndarray, *, axes: str, pixel_size_mm: tuple[float, float], info: dict,
@@ -62,6 +63,16 @@ def read_projections(path) -> Projections:
     """The stack :func:`write_projections` wrote (its metadata must carry the geometry)."""
     data, info = read_tiff(path)
     return Projections.from_metadata(data, info, str(path))
+
+
+def write_volume(path, data: np.ndarray, grid: VolumeGeometry, info: dict, *, channels: str | None = None) -> Path:
+    """A volume on ``grid`` (z, y, x; or z, ``channels``, y, x, e.g. one channel per label) as an
+    ImageJ TIFF whose voxel size Fiji reads (mm), with ``info``, the axes and the grid's dict form
+    as metadata."""
+    vz, vy, vx = grid.voxel_size
+    axes = {"axes": f"z, {channels}, y, x" if channels else "z, y, x", "volume_geometry": grid.to_dict()}
+    return write_tiff(path, data, axes="ZCYX" if channels else "ZYX", pixel_size_mm=(vy, vx), spacing_mm=vz,
+                      info={**info, **axes})
 
 
 def pixel_size_mm(geometry) -> tuple[float, float]:
