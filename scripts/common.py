@@ -150,6 +150,27 @@ def finish(machine: dict) -> str:
     return "load average at end (1/5/15 min): " + ", ".join(f"{x:.2f}" for x in machine["loadavg_end"])
 
 
+def announce(gl: xr.GLContext | None = None, cl: xr.CLContext | None = None) -> tuple[str, dict]:
+    """(command line, machine info) of this run, both printed: the first lines of a script's output."""
+    command = command_line()
+    machine = machine_info(gl=gl, cl=cl)
+    print_machine(machine, command)
+    return command, machine
+
+
+def conclude(path: Path, payload: dict, machine: dict, t_start: float, *, top_level_load: bool = False) -> None:
+    """The last lines of a run: its total time (``payload["total_s"]``, from ``t_start``,
+    perf_counter), the load at the end, the results written to ``path``. ``top_level_load``:
+    also copy the end load to ``payload["loadavg_end"]``."""
+    payload["total_s"] = time.perf_counter() - t_start
+    say(finish(machine))
+    if top_level_load:
+        payload["loadavg_end"] = machine["loadavg_end"]
+    write_json(path, payload)
+    say(f"results: {path}")
+    say(f"total {payload['total_s']:.1f} s")
+
+
 # ---------------------------------------------------------------------------------------------
 # Timing
 # ---------------------------------------------------------------------------------------------
