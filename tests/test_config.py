@@ -318,7 +318,8 @@ translate = [1, 2, 3]
 """)
     assert loaded.geometry == ParallelBeamGeometry((8, 12), (0.5, 0.25), (0.0, math.pi / 2), (0.0, 1.5))
     rod = loaded.scene.objects[0]
-    assert (rod.name, rod.material, rod.label, rod.priority) == ("rod", "steel", 7, 2.5)
+    assert (rod.name, rod.label, rod.priority) == ("rod", 7, 2.5)
+    assert rod.material == Material.named("steel") and rod.material.name == "steel"  # a library name, no [materials]
     lo, hi = rod.mesh.bounds
     np.testing.assert_allclose((hi + lo) / 2, [1, 2, 3], atol=1e-9)
     assert hi[1] - lo[1] == pytest.approx(8.0)  # height 4 scaled by 2, turned from z onto y
@@ -461,7 +462,8 @@ SRC_AT = r"scene\.toml \[source\]"
 DET_AT = r"scene\.toml \[detector\]"
 PHYSICS_ERRORS = {
     "undefined material": (CONE + MATS.replace("[materials.b]", "[materials.bb]") + BALL,
-                           BALL_AT + r": material 'b' is not defined in \[materials\] \(defined: a, bb\); add a \[materials\.b\] table"),
+                           BALL_AT + r": material 'b' is not defined in \[materials\] \(defined: a, bb\) nor a library material "
+                           r"\(air, water, .*\); add a \[materials\.b\] table"),
     "materials not a table": ("materials = 3\n" + CONE + BALL, r"scene\.toml: materials must be a table"),
     "material not a table": (CONE + "[materials]\nm = 3\n" + BALL, MAT_AT + r": must be a table"),
     "material no kind": (CONE + "[materials.m]\ndensity = 1.0\n" + BOX, MAT_AT + r": give exactly one of element, formula, mass_fractions \(got none\)"),
@@ -499,8 +501,9 @@ PHYSICS_ERRORS = {
     "missing spectrum file": (CONE + '[source]\nspectrum_file = "nope.txt"\n' + BOX, SRC_AT + r": spectrum file '.*nope\.txt' cannot be read"),
     "detector unknown key": (CONE + "[detector]\nnoise = 1\n" + BOX, DET_AT + r": unknown key\(s\) noise; allowed: blur_sigma_px, dark, "),
     "detector mode": (CONE + '[detector]\nmode = "photon"\n' + BOX, DET_AT + r": mode must be 'integrating' or 'counting', got 'photon'"),
-    "scintillator undefined": (CONE + '[detector]\nscintillator = "csi"\nscintillator_mm = 1\n' + BOX,
-                               DET_AT + r": scintillator 'csi' is not defined in \[materials\] \(defined: none\)"),
+    "scintillator undefined": (CONE + '[detector]\nscintillator = "lyso"\nscintillator_mm = 1\n' + BOX,
+                               DET_AT + r": scintillator 'lyso' is not defined in \[materials\] \(defined: none\) nor a "
+                                        r"library material \(air, .*csi"),
     "scintillator number": (CONE + "[detector]\nscintillator = 5\n" + BOX, DET_AT + r": scintillator must be a material name"),
     "scintillator inline bad": (CONE + '[detector]\nscintillator = { formula = "CsI" }\nscintillator_mm = 1\n' + BOX,
                                 DET_AT + r" scintillator: missing 'density'"),

@@ -1,6 +1,12 @@
 """xrayraster: X-ray CT simulation from triangle meshes (see README.md; the layers are in docs/architecture.md).
 
 The public API is what this module exports; the stage subpackages below it may reorganise.
+
+Units: lengths in mm everywhere (geometry, meshes, path lengths, voxel sizes). Attenuation is
+mm⁻¹ inside, where it meets path lengths in mm (:meth:`Material.attenuation_per_mm`, also
+``Material.attenuation``; a line integral ∫μ dl is then dimensionless), and cm⁻¹ in
+reconstructed volumes, as CT tools report it (``Volume.data`` with ``Volume.unit == "1/cm"``;
+1 mm⁻¹ = 10 cm⁻¹). Mass attenuation μ/ρ is cm²/g and density g/cm³, as the tables give them.
 """
 
 from .core.errors import (

@@ -85,3 +85,25 @@ class Projections:
         provenance = {k: v for k, v in info.items() if k not in known}
         geometry = geometry_from_dict(info["geometry"], f"{where} geometry")
         return cls(data, geometry, quantity, info.get("units", QUANTITIES[quantity][0]), provenance)
+
+    def save(self, path, *, quicklook: bool = True):
+        """Write the stack as the command line does: a float32 ImageJ TIFF at ``path`` (Fiji
+        reads the detector pixel size in mm) with :meth:`metadata` as JSON, and, with
+        ``quicklook``, a PNG beside it (``path`` with suffix ``.png``: view 0, summed over
+        materials for path lengths, +z up, with a scale bar at the detector). Returns ``path``;
+        :meth:`load` reads it back."""
+        from .tiff import pixel_size_mm, write_projections, write_quicklook
+
+        out = write_projections(path, self)
+        if quicklook:
+            first = self.data[0].sum(axis=0) if self.quantity == "path_length" else self.data[0]
+            write_quicklook(out.with_suffix(".png"), first, pixel_size_mm(self.geometry), where="at the detector")
+        return out
+
+    @classmethod
+    def load(cls, path) -> Projections:
+        """The stack :meth:`save` (or ``xrayraster render``) wrote; its metadata must carry the geometry."""
+        from .tiff import read_tiff
+
+        data, info = read_tiff(path)
+        return cls.from_metadata(data, info, str(path))

@@ -14,6 +14,7 @@ import ctypes
 import ctypes.util
 import os
 import re
+import threading
 from contextlib import contextmanager
 
 import moderngl
@@ -35,6 +36,10 @@ class GLContext:
     """A headless OpenGL 4.3+ context plus the compiled programs of ``shaders/``.
 
     Use as a context manager or call :meth:`release`. Programs are compiled once per context.
+
+    A context belongs to the thread that created it: using it (or a ``Renderer`` or voxelizer
+    holding it) from another thread raises :class:`~xrayraster.GLContextError`. Create one per
+    thread, in the thread that uses it.
     """
 
     def __init__(self, backend: str | None = None):
@@ -43,6 +48,8 @@ class GLContext:
             raise GLContextError(f"unknown GL backend {backend!r}: use 'egl' or 'osmesa' (XRAYRASTER_GL)")
         errors = []
         self._depth = 0  # nesting of current()
+        self._thread = threading.get_ident()  # GL contexts are current per thread: ours is this one's
+        self._thread_name = threading.current_thread().name
         self._osmesa = None
         self.ctx = None
         for name in (backend,) if backend else ("egl", "osmesa"):
@@ -67,7 +74,16 @@ class GLContext:
         previous one again on exit. GL calls go to whichever context is current, so every
         public entry point that touches GL state enters this: several contexts (ours, a
         second renderer's, a peer library's) can then live in one process. Re-entrant: only
-        the outermost level switches (moderngl's own enter/exit do not nest)."""
+        the outermost level switches (moderngl's own enter/exit do not nest).
+
+        Raises :class:`~xrayraster.GLContextError` in a thread other than the creating one."""
+        if threading.get_ident() != self._thread:
+            raise GLContextError(
+                f"this OpenGL context belongs to the thread that created it ({self._thread_name!r}) and cannot be used "
+                f"from thread {threading.current_thread().name!r}; create the Renderer (or GLContext) in the thread "
+                "that uses it, one per thread")
+        if self.ctx is None:
+            raise GLContextError("this OpenGL context was released; create a new Renderer (or GLContext)")
         if self._depth == 0:
             self.ctx.__enter__()
         self._depth += 1

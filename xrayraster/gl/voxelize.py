@@ -63,6 +63,29 @@ class LabelVolume:
     labels: tuple[int, ...] | None = None
     fractions: np.ndarray | None = None
 
+    def save(self, path, *, quicklook: bool = True):
+        """Write the labels as ``xrayraster voxelize`` does: a uint8/uint16 ImageJ TIFF (z, y, x) at
+        ``path`` whose voxel size Fiji reads in mm, with the grid's dict form
+        (``volume_geometry``) as JSON metadata; with fractions, ``<stem>_fractions.tif`` beside it
+        (float32, z, label, y, x: one channel per label of :attr:`labels`); and, with
+        ``quicklook``, a PNG of the central slice with a scale bar. Returns ``path``."""
+        from ..core.tiff import write_quicklook, write_volume
+
+        present = sorted(int(k) for k in np.unique(self.data) if k)
+        out = write_volume(path, self.data, self.geometry, {
+            "quantity": "label (0: background; else the label of the highest-priority object at the voxel centre)",
+            "labels_present": present})
+        if self.fractions is not None:
+            # ImageJ hyperstacks are ordered T Z C Y X: one channel per label.
+            write_volume(out.with_name(f"{out.stem}_fractions.tif"), self.fractions.transpose(1, 0, 2, 3),
+                         self.geometry, channels="label", info={
+                             "quantity": "share of each voxel owned by each label, from sub-voxel centres",
+                             "channel_labels": list(self.labels or ())})
+        if quicklook:
+            middle = self.data[self.data.shape[0] // 2].astype(np.float32)
+            write_quicklook(out.with_suffix(".png"), middle, self.geometry.voxel_size[1:])
+        return out
+
 
 def column_geometry(volume: VolumeGeometry) -> VectorGeometry:
     """The parallel "view" along +z whose pixel (row j, col i) is voxel column (j, i)."""

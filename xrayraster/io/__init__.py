@@ -7,6 +7,8 @@ from .tiff import (
     write_projections,
     write_quicklook,
     write_tiff,
+    write_volume,
 )
 
-__all__ = ["read_projections", "read_tiff", "read_tiff_info", "write_projections", "write_quicklook", "write_tiff"]
+__all__ = ["read_projections", "read_tiff", "read_tiff_info", "write_projections", "write_quicklook", "write_tiff",
+           "write_volume"]

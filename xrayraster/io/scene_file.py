@@ -1,4 +1,10 @@
-"""TOML scene files: a scan geometry plus objects (see docs/scene-format.md)."""
+"""TOML scene files: a scan geometry plus objects (see docs/scene-format.md).
+
+Materials by name: an object's ``material`` (or the detector's ``scintillator``) is looked up in
+the file's ``[materials]`` first, then in the named-material library
+(:mod:`xrayraster.scene.material_library`, e.g. "water", "pmma", "aluminium", "steel"), so a
+``[materials]`` entry always wins over a library material of the same name.
+"""
 
 from __future__ import annotations
 
@@ -11,19 +17,29 @@ import numpy as np
 
 from ..core import fields
 from ..core.choices import DETECTOR_MODES
-from ..core.errors import ConfigError, MaterialError, PhysicsError, SpectrumError
+from ..core.errors import (
+    ConfigError,
+    MaterialError,
+    MeshError,
+    PhysicsError,
+    SceneError,
+    SpectrumError,
+)
 from ..core.geometry import ConeBeamGeometry, ParallelBeamGeometry, geometry_from_dict
 from ..core.transform import Transform
 from ..physics.detector import Detector
 from ..physics.spectrum import Spectrum
+from ..scene.material_library import library_key
 from ..scene.materials import ENERGY_MAX_KEV, ENERGY_MIN_KEV, Material
 from ..scene.scene import Scene
 
 
 @dataclass(frozen=True)
 class SceneFile:
-    """A loaded scene file. ``materials`` ({NAME: Material}), ``spectrum`` and ``detector`` are
-    None when the file has no ``[materials]``, ``[source]`` or ``[detector]`` table."""
+    """A loaded scene file. ``materials`` ({NAME: Material}): the ``[materials]`` table and the
+    library materials the objects use by name; None when the file has no ``[materials]`` and some
+    object's material is neither (then only path lengths can be rendered). ``spectrum`` and
+    ``detector`` are None when the file has no ``[source]`` or ``[detector]`` table."""
 
     path: Path
     geometry: ConeBeamGeometry | ParallelBeamGeometry
@@ -70,11 +86,14 @@ def load_scene_file(path) -> SceneFile:
     if not objects:
         raise ConfigError(f"{path}: no [[objects]]; add at least one object with a mesh and a material")
     scene = Scene()
+    library: dict[str, Material] = {}  # library materials the objects use, by the name they give
     for k, spec in enumerate(objects):
         where = f"{path} [[objects]] #{k + 1}"
         if not isinstance(spec, dict):
             raise ConfigError(f"{where}: must be a table ([[objects]]), got {spec!r}")
-        _add_object(scene, spec, path.parent, where, materials)
+        _add_object(scene, spec, path.parent, where, materials, library)
+    if library and (materials is not None or all(isinstance(o.material, Material) for o in scene.objects)):
+        materials = {**library, **(materials or {})}
     spectrum = None
     if "source" in data:
         spectrum = _source(fields.table(data["source"], "source", f"{path}"), path.parent, f"{path} [source]")
@@ -84,7 +103,8 @@ def load_scene_file(path) -> SceneFile:
     return SceneFile(path, geometry, scene, materials, spectrum, detector)
 
 
-def _add_object(scene: Scene, spec: dict, base: Path, where: str, materials: dict | None = None) -> None:
+def _add_object(scene: Scene, spec: dict, base: Path, where: str, materials: dict | None = None,
+                library: dict | None = None) -> None:
     name = spec.get("name")
     if name is not None:
         if not isinstance(name, str) or not name:
@@ -94,24 +114,39 @@ def _add_object(scene: Scene, spec: dict, base: Path, where: str, materials: dic
     mesh, material = fields.required(spec, "mesh", where), fields.required(spec, "material", where)
     if isinstance(material, (list, dict)):
         raise ConfigError(f"{where}: material must be a name (a string), got {material!r}")
-    if materials is not None:
-        if not isinstance(material, str) or material not in materials:
-            defined = ", ".join(sorted(materials)) or "none"
-            raise ConfigError(
-                f"{where}: material {material!r} is not defined in [materials] (defined: {defined}); "
-                f"add a [materials.{material}] table or use a defined name"
-            )
-        material = materials[material]
+    if materials is not None and isinstance(material, str) and material in materials:
+        material = materials[material]  # [materials] wins over the library
+    elif isinstance(material, str) and library_key(material):
+        material = _library(material)
+        if library is not None:
+            library[material.name] = material
+    elif materials is not None:
+        defined = ", ".join(sorted(materials)) or "none"
+        raise ConfigError(
+            f"{where}: material {material!r} is not defined in [materials] (defined: {defined}) nor a library "
+            f"material ({', '.join(Material.library_names())}); add a [materials.{material}] table or use one of those"
+        )
     label = spec.get("label")
-    scene.add(
-        _mesh(mesh, base, where),
-        material,
+    options = dict(
         name=name,
         label=None if label is None else fields.integer(label, "label", where, 1, 65535),
         priority=fields.number(spec.get("priority", 0), "priority", where),
         unit_scale=fields.number(spec.get("unit_scale", 1.0), "unit_scale", where, positive=True),
         transform=_placement(spec, where),
     )
+    source = _mesh(mesh, base, where)
+    try:
+        scene.add(source, material, **options)
+    except (MeshError, SceneError) as exc:  # open mesh, NaN vertices, unreadable file: name the entry
+        what = f"mesh file {str(source)!r}" if isinstance(source, Path) else f"mesh primitive {mesh!r}"
+        raise ConfigError(f"{where}: {what}: {exc}") from None
+
+
+def _library(name: str) -> Material:
+    """The library material ``name`` stands for, called ``name`` (as the file writes it)."""
+    import dataclasses
+
+    return dataclasses.replace(Material.named(name), name=name)
 
 
 # ----------------------------------------------------------------------------- tables
@@ -254,11 +289,15 @@ def _detector(spec: dict, materials: dict | None, where: str) -> Detector:
     if mode not in DETECTOR_MODES:
         raise ConfigError(f"{where}: mode must be 'integrating' or 'counting', got {mode!r}")
     scintillator = spec.get("scintillator")
-    if isinstance(scintillator, str):
+    if isinstance(scintillator, str) and (materials is None or scintillator not in materials) \
+            and library_key(scintillator):
+        scintillator = _library(scintillator)
+    elif isinstance(scintillator, str):
         if materials is None or scintillator not in materials:
             defined = ", ".join(sorted(materials)) if materials else "none"
             raise ConfigError(
-                f"{where}: scintillator {scintillator!r} is not defined in [materials] (defined: {defined}); add "
+                f"{where}: scintillator {scintillator!r} is not defined in [materials] (defined: {defined}) nor a library "
+                f"material ({', '.join(Material.library_names())}); add "
                 f"[materials.{scintillator}], or give an inline table such as {{ formula = \"CsI\", density = 4.51 }}"
             )
         scintillator = materials[scintillator]

@@ -13,8 +13,12 @@ Canonical form (applied on every construction, so equal compositions compare equ
 elements sorted by atomic number, zero fractions dropped, fractions normalised to sum 1 and
 rounded to 12 significant digits.
 
+Named materials with published compositions and densities: ``Material.named("water")``
+(:meth:`Material.library_names` lists them; sources in :mod:`xrayraster.scene.material_library`).
+
 Units: density g/cm³, energies keV, :meth:`Material.mass_attenuation` cm²/g,
-:meth:`Material.attenuation` mm⁻¹ (the package's internal unit; docs/physics.md).
+:meth:`Material.attenuation_per_mm` (also :meth:`Material.attenuation`) mm⁻¹, the package's
+internal unit; reconstructions (``xr.Volume``) are in cm⁻¹ (docs/physics.md).
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ import numpy as np
 import xraylib
 
 from ..core.errors import MaterialError
+from .material_library import LIBRARY, library_key
 
 try:  # array interface shipped with the xraylib wheels; same C code as the scalar functions
     import xraylib_np as _xraylib_np
@@ -241,6 +246,23 @@ class Material:
         object.__setattr__(material, "name", name)
         return material
 
+    @classmethod
+    def named(cls, name: str) -> Material:
+        """A material of the library (:meth:`library_names`): e.g. ``"water"``, ``"pmma"``,
+        ``"aluminium"``, ``"epoxy"`` (DGEBA), ``"carbon_fibre"``, ``"e_glass"``, ``"steel"``,
+        ``"bone"`` (ICRU-44 cortical), ``"csi"``, ``"gd2o2s"``; case, spaces and dashes are
+        ignored, and aliases such as "aluminum" or "perspex" accepted. Each composition and
+        density, with its published source, is in :mod:`xrayraster.scene.material_library`."""
+        key = library_key(name)
+        if key is None:
+            raise MaterialError(f"no material named {name!r} in the library; known: {', '.join(cls.library_names())}")
+        return _library_material(key)
+
+    @staticmethod
+    def library_names() -> tuple[str, ...]:
+        """The names :meth:`named` knows (without aliases)."""
+        return tuple(LIBRARY)
+
     # -- properties --------------------------------------------------------------------------
 
     @property
@@ -269,6 +291,28 @@ class Material:
         cs = _cs_total(zs, e.reshape(-1))  # (elements, energies)
         return (ws @ cs).reshape(e.shape)
 
-    def attenuation(self, energies_kev) -> np.ndarray:
-        """Linear attenuation coefficient μ in mm⁻¹ (= μ/ρ [cm²/g] · ρ [g/cm³] / 10)."""
+    def attenuation_per_mm(self, energies_kev) -> np.ndarray:
+        """Linear attenuation coefficient μ in mm⁻¹ (= μ/ρ [cm²/g] · ρ [g/cm³] / 10), the unit
+        the path-length physics uses (path lengths are in mm)."""
         return self.mass_attenuation(energies_kev) * (self.density / 10.0)
+
+    def attenuation(self, energies_kev) -> np.ndarray:
+        """The same as :meth:`attenuation_per_mm`: μ in mm⁻¹."""
+        return self.attenuation_per_mm(energies_kev)
+
+
+@lru_cache(maxsize=None)
+def _library_material(key: str) -> Material:
+    kind, value, density, _source = LIBRARY[key]
+    if kind == "element":
+        return Material.element(value, density, name=key)
+    if kind == "formula":
+        return Material.from_formula(value, density, name=key)
+    if kind == "oxides":  # oxide mass fractions → element mass fractions
+        elements: dict[int, float] = {}
+        for oxide, share in value.items():
+            parsed = xraylib.CompoundParser(oxide)
+            for z, w in zip(parsed["Elements"], parsed["massFractions"]):
+                elements[z] = elements.get(z, 0.0) + share * w
+        return Material(key, tuple(elements.items()), density)
+    return Material.from_mass_fractions(value, density, name=key)

@@ -3,9 +3,12 @@ detector, noise). GL knows nothing of photons and the physics nothing of GL; thi
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 
 from ..core.errors import RenderError
+from ..core.projections import Projections
 from ..gl.pathlengths import PathLengthRenderer
 from ..physics.beer_lambert import pixel_photon_factor, thread_count
 from ..physics.detector import Detector
@@ -41,3 +44,104 @@ class Renderer(PathLengthRenderer):
         factor = pixel_photon_factor(self.vector_geometry, view)
         return radiograph(lengths, scene.materials, spectrum, detector or Detector(), factor, output=output,
                           noise=noise, rng=rng, threads=self.threads)
+
+    # -- every view in one call ----------------------------------------------------------------
+
+    def path_lengths_all(self, scene: Scene, views=None, *, progress=None) -> Projections:
+        """The path lengths of ``views`` (default every view; a list of indices) stacked into an
+        :class:`~xrayraster.Projections` of quantity ``"path_length"`` in mm, on
+        ``geometry[views]``, each view exactly :meth:`path_lengths`.
+
+        ``progress``: ``True`` a tqdm bar on stderr, ``False`` none, or a callable
+        ``progress(done, total)`` called after each view; default a bar when stderr is a terminal.
+        """
+        views = self._views(views)
+        stack = np.stack([self.path_lengths(scene, v) for v in _report(views, progress, "path lengths")])
+        return Projections(stack, self.geometry[views], "path_length", "mm", {
+            "materials": [_material_name(m) for m in scene.materials],
+            "views": views,
+            "supersampling": self.supersampling,
+            "method": self.last_method,
+            "renderer": self.gl.renderer,
+        })
+
+    def project_all(self, scene: Scene, spectrum, views=None, *, detector: Detector | None = None,
+                    output: str = "lineint", noise: bool = False, seed: int | None = None,
+                    progress=None) -> Projections:
+        """The radiographs of ``views`` (default every view) stacked into an
+        :class:`~xrayraster.Projections` on ``geometry[views]``, each view exactly :meth:`project`
+        (same options; noise streams are seeded per view index, so a subset gives the same bytes
+        as the full run). Unit: ``"1"`` for lineint and transmission; raw is ``"counts"`` for a
+        counting detector, else ``"keV deposited"``. The provenance records the views, materials,
+        spectrum, detector, seed and per-view bins, dropped signal and starved pixels, as the
+        command line writes them. ``progress`` as in :meth:`path_lengths_all`.
+        """
+        if noise and seed is None:
+            raise RenderError("noise=True needs a seed (an int), so the noise is reproducible")
+        views = self._views(views)
+        detector = detector or Detector()
+        shots = [self.project(scene, spectrum, v, detector=detector, output=output, noise=noise, seed=seed)
+                 for v in _report(views, progress, output)]
+        unit = "1" if output != "raw" else "counts" if detector.counting else "keV deposited"
+        return Projections(np.stack([shot.image for shot in shots]), self.geometry[views], output, unit, {
+            "materials": [_material_name(m) for m in scene.materials],
+            "material_compositions": [repr(m) for m in scene.materials],
+            "views": views,
+            "spectrum": spectrum.description,
+            "spectrum_photons_per_mm2_at_1m": spectrum.total,
+            "spectrum_bins": spectrum.n_bins,
+            "detector": repr(detector),
+            "bins_used": [shot.bins for shot in shots],
+            "dropped_signal_share": [shot.dropped for shot in shots],
+            "starved_pixels": [shot.starved for shot in shots],
+            "noise": bool(noise),
+            "seed": seed,
+            "supersampling": self.supersampling,
+            "method": self.last_method,
+            "renderer": self.gl.renderer,
+        })
+
+    def _views(self, views) -> list[int]:
+        """``views`` (None: all) as a list of in-range indices, negatives counted from the end."""
+        n = self.vector_geometry.num_views
+        if views is None:
+            return list(range(n))
+        if isinstance(views, (int, np.integer)):
+            raise RenderError(f"views must be a list of view indices (or None for all), got {views!r}; "
+                              "for one view use path_lengths(scene, view) or project(...)")
+        out = []
+        for v in views:
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not -n <= v < n:
+                raise RenderError(f"view {v!r} is not an index of the geometry's {n} views")
+            out.append(int(v) % n)
+        if not out:
+            raise RenderError("views is empty; give at least one view index (or None for all)")
+        return out
+
+
+def _material_name(material) -> str:
+    return material.name if hasattr(material, "name") else str(material)
+
+
+def _report(views: list[int], progress, what: str):
+    """Iterate ``views`` reporting progress: a tqdm bar (True, or None with stderr a terminal), a
+    callable ``progress(done, total)`` after each view, or nothing (False)."""
+    if progress is None:
+        progress = bool(getattr(sys.stderr, "isatty", lambda: False)())
+    total = len(views)
+    if callable(progress) and not isinstance(progress, bool):
+        for k, v in enumerate(views, 1):
+            yield v
+            progress(k, total)
+        return
+    if progress is not True and progress is not False:
+        raise RenderError(f"progress must be True, False, None or a callable progress(done, total), got {progress!r}")
+    if not progress:
+        yield from views
+        return
+    from tqdm import tqdm
+
+    with tqdm(total=total, desc=what, unit="view", file=sys.stderr) as bar:
+        for v in views:
+            yield v
+            bar.update(1)
