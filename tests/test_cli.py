@@ -169,7 +169,7 @@ def test_bad_input_exits_2_with_a_message_and_writes_nothing(scene, extra, messa
     assert not (tmp_path / "out").exists()
 
 
-def test_a_failed_write_leaves_the_old_file_and_no_temporary(tmp_path, monkeypatch, gl):
+def test_a_failed_write_leaves_the_old_file_and_no_temporary(tmp_path, monkeypatch, gl, capsys):
     """Atomic output: a crash while writing keeps the previous file intact and removes the partial one."""
     out = tmp_path / "result.tif"
     out.write_bytes(b"previous result")
@@ -179,8 +179,8 @@ def test_a_failed_write_leaves_the_old_file_and_no_temporary(tmp_path, monkeypat
         raise OSError("disk full")
 
     monkeypatch.setattr(tifffile, "imwrite", half_write)
-    with pytest.raises(OSError, match="disk full"):
-        cli.main(["render", str(EXAMPLE), "-o", str(out), "--path-lengths"])
+    assert cli.main(["render", str(EXAMPLE), "-o", str(out), "--path-lengths"]) == 1
+    assert capsys.readouterr().err == "xrayraster: error: disk full\n"
     assert out.read_bytes() == b"previous result"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["result.tif"]
 

@@ -52,7 +52,7 @@ def test_reconstruct_writes_the_fdk_volume_with_its_voxel_size(cl, tmp_path, sta
     path, p = stack
     scan = _scan(tmp_path, volume=VOLUME_JSON, **({"geometry": GEOMETRY_JSON} if with_geometry else {}))
     out = tmp_path / "vol.tif"
-    assert cli.main(["reconstruct", str(path), "--geometry", str(scan), "-o", str(out), "--filter", "hann"]) == 0
+    assert cli.main(["reconstruct", str(path), "--scan-file", str(scan), "-o", str(out), "--filter", "hann"]) == 0
     assert "12×20×24 voxels" in capsys.readouterr().out
     with tifffile.TiffFile(out) as tif:
         data = tif.asarray()
@@ -72,22 +72,26 @@ def test_reconstruct_bad_input_exits_2_and_names_the_fix(tmp_path, stack, capsys
     path, p = stack
     out = tmp_path / "vol.tif"
     wrong = dict(GEOMETRY_JSON, views=59)
-    assert cli.main(["reconstruct", str(path), "--geometry", str(_scan(tmp_path, geometry=wrong, volume=VOLUME_JSON)),
+    assert cli.main(["reconstruct", str(path), "--scan-file", str(_scan(tmp_path, geometry=wrong, volume=VOLUME_JSON)),
                      "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "scan geometries of" in err and "differ (num_views 59 vs 60" in err and "--geometry-from" in err, err
+    assert cli.main(["reconstruct", str(path), "--scan-file", str(_scan(tmp_path, geometry=wrong, volume=VOLUME_JSON)),
+                     "--geometry-from", "scan-file", "-o", str(out)]) == 2
     assert "geometry has 59 views" in capsys.readouterr().err
     bare = tmp_path / "bare.tif"
     tifffile.imwrite(bare, p)
-    assert cli.main(["reconstruct", str(bare), "--geometry", str(_scan(tmp_path, volume=VOLUME_JSON)), "-o", str(out)]) == 2
+    assert cli.main(["reconstruct", str(bare), "--scan-file", str(_scan(tmp_path, volume=VOLUME_JSON)), "-o", str(out)]) == 2
     assert "has no 'geometry'" in capsys.readouterr().err
-    assert cli.main(["reconstruct", str(path), "--geometry", str(_scan(tmp_path, geometry=GEOMETRY_JSON)), "-o", str(out)]) == 2
+    assert cli.main(["reconstruct", str(path), "--scan-file", str(_scan(tmp_path, geometry=GEOMETRY_JSON)), "-o", str(out)]) == 2
     assert "needs a 'volume'" in capsys.readouterr().err
     bad = dict(GEOMETRY_JSON, angles_deg=[0, 90])
-    assert cli.main(["reconstruct", str(path), "--geometry", str(_scan(tmp_path, geometry=bad, volume=VOLUME_JSON)),
+    assert cli.main(["reconstruct", str(path), "--scan-file", str(_scan(tmp_path, geometry=bad, volume=VOLUME_JSON)),
                      "-o", str(out)]) == 2
     assert "not both" in capsys.readouterr().err
     raw = tmp_path / "raw.tif"
     write_tiff(raw, p, axes="TYX", pixel_size_mm=(0.8, 0.8), info={"output": "raw", "geometry": GEOMETRY.to_dict()})
-    assert cli.main(["reconstruct", str(raw), "--geometry", str(_scan(tmp_path, volume=VOLUME_JSON)), "-o", str(out)]) == 2
+    assert cli.main(["reconstruct", str(raw), "--scan-file", str(_scan(tmp_path, volume=VOLUME_JSON)), "-o", str(out)]) == 2
     assert "raw detector signal" in capsys.readouterr().err
     assert not out.exists()
 
@@ -108,7 +112,7 @@ def test_voxelize_writes_labels_fiji_reads(gl, tmp_path, capsys):
     example = Path(__file__).resolve().parent.parent / "examples" / "bracket_and_ball.toml"
     volume = {"shape": [32, 48, 40], "voxel_size": [0.3, 0.25, 0.3], "offset": [0.0, 0.5, -0.2]}
     out = tmp_path / "labels.tif"
-    assert cli.main(["voxelize", str(example), "--volume", str(_scan(tmp_path, volume=volume)), "-o", str(out)]) == 0
+    assert cli.main(["voxelize", str(example), "--scan-file", str(_scan(tmp_path, volume=volume)), "-o", str(out)]) == 0
     assert "uint8 labels" in capsys.readouterr().out
     with tifffile.TiffFile(out) as tif:
         data = tif.asarray()
@@ -119,10 +123,10 @@ def test_voxelize_writes_labels_fiji_reads(gl, tmp_path, capsys):
     want = xr.voxelize(load_scene_file(example).scene, xr.VolumeGeometry((32, 48, 40), (0.3, 0.25, 0.3), (0.0, 0.5, -0.2)),
                        context=gl).data
     assert np.array_equal(data, want) and set(np.unique(data)) == {0, 1, 2}
-    assert cli.main(["voxelize", str(example), "--volume", str(_scan(tmp_path, volume=volume)), "-o", str(out),
+    assert cli.main(["voxelize", str(example), "--scan-file", str(_scan(tmp_path, volume=volume)), "-o", str(out),
                      "--fractions", "2"]) == 0
     shares = tifffile.imread(tmp_path / "labels_fractions.tif")
     assert shares.shape == (32, 3, 48, 40) and read_tiff_info(tmp_path / "labels_fractions.tif")["channel_labels"] == [0, 1, 2]
     np.testing.assert_allclose(shares.sum(axis=1), 1.0, atol=1e-6)
-    assert cli.main(["voxelize", str(example), "--volume", str(_scan(tmp_path, geometry=GEOMETRY_JSON)), "-o", str(out)]) == 2
+    assert cli.main(["voxelize", str(example), "--scan-file", str(_scan(tmp_path, geometry=GEOMETRY_JSON)), "-o", str(out)]) == 2
     assert "needs a 'volume'" in capsys.readouterr().err

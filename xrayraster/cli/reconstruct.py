@@ -1,7 +1,9 @@
-"""``xrayraster reconstruct PROJECTIONS.tif --geometry SCAN.json -o VOLUME.tif``: FDK or FBP of a projection stack."""
+"""``xrayraster reconstruct PROJECTIONS.tif --scan-file SCAN.json -o VOLUME.tif``: FDK or FBP of a projection stack."""
 
 from __future__ import annotations
 
+import math
+import sys
 import time
 from pathlib import Path
 
@@ -13,13 +15,34 @@ from ..core.geometry import geometry_from_dict
 from ..io.scan_file import read_scan_file
 from ..io.tiff import read_tiff, write_quicklook, write_volume
 from ..recon.fdk import fdk
+from .options import add_scan_file
+from .outputs import check_outputs, quicklook_path
+
+GEOMETRY_SOURCES = ("scan-file", "projections")
+
+# Angular sampling. The usual rule asks for about (π/2)·N views over the scan for a grid N voxels
+# across (its larger transverse side): then the arc between neighbouring views at the grid's edge
+# is about one voxel (Kak & Slaney, ch. 5). Fewer views give streaks, at first faint; below a
+# quarter of the rule (neighbouring views four or more voxels apart at the edge) they cross the
+# whole slice and are easily mistaken for structure, so the command warns (a sparse-view study
+# may mean it: the warning does not stop it). The bundled example's 4 views warn on any grid more
+# than 10 voxels across (4 < ¼·(π/2)·N for N ≥ 11).
+UNDERSAMPLED_SHARE = 0.25
+
+
+def views_needed(volume) -> float:
+    """(π/2)·N views for a grid N voxels across its larger transverse side (y, x)."""
+    return math.pi / 2 * max(volume.shape[1], volume.shape[2])
 
 
 def add_parser(subparsers) -> None:
     rec = subparsers.add_parser("reconstruct", help="FDK (cone beam) or FBP (parallel beam) reconstruction of a projection stack")
     rec.add_argument("projections", type=Path, help="TIFF stack (views, rows, cols), e.g. from 'xrayraster render --views all'")
-    rec.add_argument("--geometry", metavar="SCAN.json", type=Path, required=True,
-                     help="scan file: the volume grid, and the scan geometry unless the TIFF carries it (docs/reconstruction.md)")
+    add_scan_file(rec, "scan file: the volume grid, and the scan geometry unless the TIFF carries it "
+                       "(docs/reconstruction.md)", deprecated="--geometry")
+    rec.add_argument("--geometry-from", choices=GEOMETRY_SOURCES, default=None,
+                     help="which scan geometry to use when the scan file and the TIFF's metadata both give one "
+                          "(default: they must agree)")
     rec.add_argument("-o", "--out", dest="out", metavar="VOLUME.tif", type=Path, required=True,
                      help="float32 TIFF volume (z, y, x) in 1/cm (a PNG of the central slice goes beside it)")
     rec.add_argument("--filter", choices=FILTERS, default="ram-lak", help="ramp filter window (default ram-lak)")
@@ -33,8 +56,64 @@ def add_parser(subparsers) -> None:
     rec.set_defaults(run=run)
 
 
+def same_geometry(a, b) -> bool:
+    """Whether two scan geometries describe the same scan (to rounding: 1e-9 relative)."""
+    if a == b:
+        return True
+    if type(a) is not type(b) or a.beam != b.beam or a.detector_shape != b.detector_shape or a.num_views != b.num_views:
+        return False
+    va, vb = a.to_vec().array, b.to_vec().array
+    return bool(np.allclose(va, vb, rtol=1e-9, atol=1e-9 * max(1.0, float(np.abs(va).max()))))
+
+
+def _differences(a, b) -> str:
+    da, db = a.to_dict(), b.to_dict()
+    if a.num_views != b.num_views:
+        da["num_views"], db["num_views"] = a.num_views, b.num_views
+    keys = [k for k in dict.fromkeys([*da, *db]) if da.get(k) != db.get(k)]
+    return ", ".join(f"{k} {da.get(k, '-')} vs {db.get(k, '-')}" for k in keys[:3]) or "values differ"
+
+
+def choose_geometry(args, scan_geometry, info):
+    """The scan geometry to use and where it came from (scan file, projections' metadata, or both)."""
+    scan, proj = str(args.scan_file), f"{args.projections} metadata"
+
+    def from_tiff():
+        if "geometry" not in info:
+            return None
+        if not isinstance(info["geometry"], dict):
+            if args.geometry_from == "projections" or scan_geometry is None:
+                raise ConfigError(f"{args.projections} carries its geometry in an older form (a Python repr); add the "
+                                  f"scan geometry to {args.scan_file} (docs/reconstruction.md)")
+            return None
+        return geometry_from_dict(info["geometry"], f"{proj} geometry")
+
+    if args.geometry_from == "scan-file":
+        if scan_geometry is None:
+            raise ConfigError(f"--geometry-from scan-file: {args.scan_file} has no 'geometry'; add it or drop the flag")
+        return scan_geometry, f"scan file {scan}"
+    tiff_geometry = from_tiff()
+    if args.geometry_from == "projections":
+        if tiff_geometry is None:
+            raise ConfigError(f"--geometry-from projections: {args.projections} carries no geometry in its metadata; "
+                              "use the scan file's (drop the flag)")
+        return tiff_geometry, f"projections {proj}"
+    if scan_geometry is None and tiff_geometry is None:
+        raise ConfigError(f"{args.scan_file} has no 'geometry' and {args.projections} carries none in its metadata; "
+                          "add the scan geometry to the scan file (docs/reconstruction.md)")
+    if tiff_geometry is None:
+        return scan_geometry, f"scan file {scan}"
+    if scan_geometry is None:
+        return tiff_geometry, proj
+    if not same_geometry(scan_geometry, tiff_geometry):
+        raise ConfigError(f"the scan geometries of {scan} and {proj} differ ({_differences(scan_geometry, tiff_geometry)}); "
+                          "choose one with --geometry-from scan-file or --geometry-from projections")
+    return scan_geometry, f"scan file {scan} (equal to the projections')"
+
+
 def run(args) -> int:
-    geometry, volume = read_scan_file(args.geometry)
+    check_outputs([args.out, quicklook_path(args.out)], [args.projections, args.scan_file])
+    scan_geometry, volume = read_scan_file(args.scan_file)
     try:
         stack, info = read_tiff(args.projections)  # info {}: from elsewhere, the scan file gives the geometry
     except (OSError, ValueError) as exc:
@@ -44,18 +123,16 @@ def run(args) -> int:
                           "(xrayraster render without --path-lengths)")
     if stack.ndim == 2:
         stack = stack[None]
-    if geometry is None:
-        if "geometry" not in info:
-            raise ConfigError(f"{args.geometry} has no 'geometry' and {args.projections} carries none in its metadata; "
-                              "add the scan geometry to the scan file (docs/reconstruction.md)")
-        if not isinstance(info["geometry"], dict):
-            raise ConfigError(f"{args.projections} carries its geometry in an older form (a Python repr); add the scan "
-                              f"geometry to {args.geometry} (docs/reconstruction.md)")
-        geometry = geometry_from_dict(info["geometry"], f"{args.projections} metadata geometry")
+    geometry, source = choose_geometry(args, scan_geometry, info)
     kind = args.input or info.get("output", "lineint")
     if kind == "raw":
         raise ConfigError(f"{args.projections} holds the raw detector signal; render with --output lineint or "
                           "transmission (flat- and dark-corrected) to reconstruct")
+    needed = views_needed(volume)
+    if stack.shape[0] < UNDERSAMPLED_SHARE * needed:
+        n = max(volume.shape[1], volume.shape[2])
+        print(f"xrayraster: warning: {stack.shape[0]} views for a grid {n} voxels across is under-sampled: the "
+              f"angular-sampling rule asks for about π/2·{n} ≈ {needed:.0f}; expect streaks", file=sys.stderr)
     start = time.perf_counter()
     vol = fdk(stack, geometry, volume, filter=args.filter, cutoff=args.cutoff, scan=args.scan, input=kind,
               device=args.device)
@@ -65,16 +142,15 @@ def run(args) -> int:
         "quantity": "linear attenuation coefficient (FDK)" if geometry.beam == "cone" else "linear attenuation coefficient (FBP)",
         "units": vol.unit,
         "geometry": geometry.to_dict(),
+        "geometry_source": source,
         "filter": args.filter,
         "cutoff": args.cutoff,
         "scan": args.scan,
         "input": kind,
         "projections_file": str(args.projections),
     })
-    png = write_quicklook(args.out.with_suffix(".png"), np.clip(vol.data[vol.data.shape[0] // 2], 0, None))
+    png = write_quicklook(quicklook_path(args.out), np.clip(vol.data[vol.data.shape[0] // 2], 0, None))
     print(f"{out}: {'×'.join(map(str, vol.data.shape))} voxels (z, y, x) of {vz:g}×{vy:g}×{vx:g} mm, "
           f"{vol.unit}, range {vol.data.min():.4g} to {vol.data.max():.4g}, {stack.shape[0]} views, "
-          f"{seconds:.2f} s; central slice {png}")
+          f"geometry from {source}, {seconds:.2f} s; central slice {png}")
     return 0
-
-

@@ -15,6 +15,8 @@ from ..io.tiff import write_projections, write_quicklook
 from ..physics.detector import Detector
 from ..scene.materials import Material
 from ..simulate.renderer import Renderer
+from .options import nonnegative_int, positive_int
+from .outputs import check_outputs, quicklook_path
 from .views import parse_views
 
 
@@ -26,17 +28,18 @@ def add_parser(subparsers) -> None:
     render.add_argument("--output", choices=RADIOGRAPH_OUTPUTS, default=None,
                         help="radiograph quantity: raw detector signal, transmission, or lineint = -ln(transmission) (default lineint)")
     render.add_argument("--noise", action="store_true", help="add quantum (Poisson) and electronic noise")
-    render.add_argument("--seed", type=int, default=None, help="noise seed (default 0; needs --noise)")
+    render.add_argument("--seed", type=nonnegative_int, default=None, help="noise seed (default 0; needs --noise)")
     render.add_argument("--path-lengths", action="store_true",
                         help="write per-material path lengths in mm instead of radiographs")
     render.add_argument("--views", default="0", help="comma-separated view indices, or 'all' (default: 0)")
-    render.add_argument("--supersampling", type=int, default=1, help="k×k rays per pixel (default 1)")
+    render.add_argument("--supersampling", type=positive_int, default=1, help="k×k rays per pixel (default 1)")
     render.add_argument("--overlap", choices=OVERLAP_MODES, default="auto", help="overlap handling (default auto)")
     render.add_argument("-v", "--verbose", action="store_true")
     render.set_defaults(run=run)
 
 
 def run(args) -> int:
+    check_outputs([args.out, quicklook_path(args.out)], [args.scene])
     if args.path_lengths:
         ignored = [flag for flag, given in (("--output", args.output is not None), ("--noise", args.noise),
                                              ("--seed", args.seed is not None)) if given]
@@ -69,7 +72,7 @@ def _render_path_lengths(args) -> int:
         "renderer": driver,
         "scene_file": str(args.scene),
     }))
-    png = write_quicklook(args.out.with_suffix(".png"), stack[0].sum(axis=0))
+    png = write_quicklook(quicklook_path(args.out), stack[0].sum(axis=0))
     print(
         f"{out}: {len(views)} view(s) × {len(scene.materials)} material(s) × {stack.shape[2]}×{stack.shape[3]} "
         f"px, max {stack.max():.4f} mm, {method} pass, {seconds:.2f} s on {driver}; quick-look {png}"
@@ -120,7 +123,7 @@ def _render_radiographs(args) -> int:
         "renderer": driver,
         "scene_file": str(args.scene),
     }))
-    png = write_quicklook(args.out.with_suffix(".png"), stack[0])
+    png = write_quicklook(quicklook_path(args.out), stack[0])
     extras = []
     if args.noise:
         extras.append(f"noise seed {seed}")

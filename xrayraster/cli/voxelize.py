@@ -1,4 +1,4 @@
-"""``xrayraster voxelize SCENE.toml --volume SCAN.json -o LABELS.tif``: label volumes on a scan file's voxel grid."""
+"""``xrayraster voxelize SCENE.toml --scan-file SCAN.json -o LABELS.tif``: label volumes on a scan file's voxel grid."""
 
 from __future__ import annotations
 
@@ -11,25 +11,32 @@ from ..gl.voxelize import voxelize
 from ..io.scan_file import read_scan_file
 from ..io.scene_file import load_scene_file
 from ..io.tiff import write_quicklook, write_volume
+from .options import add_scan_file, positive_int
+from .outputs import check_outputs, quicklook_path
 
 
 def add_parser(subparsers) -> None:
     vox = subparsers.add_parser("voxelize", help="label volume of a TOML scene on a voxel grid (the reconstruction's)")
     vox.add_argument("scene", type=Path, help="scene file (docs/scene-format.md): objects, labels, priorities")
-    vox.add_argument("--volume", metavar="SCAN.json", type=Path, required=True,
-                     help="scan file whose 'volume' gives the voxel grid (docs/reconstruction.md)")
+    add_scan_file(vox, "scan file whose 'volume' gives the voxel grid (docs/reconstruction.md)", deprecated="--volume")
     vox.add_argument("-o", "--out", dest="out", metavar="LABELS.tif", type=Path, required=True,
                      help="uint8 (uint16 above 255 labels) TIFF (z, y, x); a PNG of the central slice goes beside it")
-    vox.add_argument("--fractions", metavar="K", type=int, default=None,
+    vox.add_argument("--fractions", metavar="K", type=positive_int, default=None,
                      help="also write partial-volume shares per label from K×K×K sub-voxels (float32 (z, label, y, x), "
                           "OUT_fractions.tif)")
     vox.add_argument("-v", "--verbose", action="store_true")
     vox.set_defaults(run=run)
 
 
+def fractions_path(out: Path) -> Path:
+    return out.with_name(f"{out.stem}_fractions.tif")
+
+
 def run(args) -> int:
+    side = [quicklook_path(args.out)] + ([fractions_path(args.out)] if args.fractions is not None else [])
+    check_outputs([args.out, *side], [args.scene, args.scan_file])
     loaded = load_scene_file(args.scene)
-    _, volume = read_scan_file(args.volume)
+    _, volume = read_scan_file(args.scan_file)
     start = time.perf_counter()
     labels = voxelize(loaded.scene, volume, fractions=args.fractions)
     seconds = time.perf_counter() - start
@@ -43,12 +50,12 @@ def run(args) -> int:
         "scene_file": str(args.scene),
     })
     if labels.fractions is not None:
-        shares = args.out.with_name(f"{args.out.stem}_fractions.tif")
+        shares = fractions_path(args.out)
         # ImageJ hyperstacks are ordered T Z C Y X: one channel per label.
         write_volume(shares, labels.fractions.transpose(1, 0, 2, 3), volume, channels="label", info={
             "quantity": f"share of each voxel owned by each label, from {args.fractions}³ sub-voxel centres",
             "channel_labels": list(labels.labels)})
-    png = write_quicklook(args.out.with_suffix(".png"), labels.data[labels.data.shape[0] // 2].astype(np.float32))
+    png = write_quicklook(quicklook_path(args.out), labels.data[labels.data.shape[0] // 2].astype(np.float32))
     counts = np.bincount(labels.data.ravel())
     present = ", ".join(f"{k}: {counts[k]}" for k in np.flatnonzero(counts) if k)
     print(f"{out}: {'×'.join(map(str, labels.data.shape))} {labels.data.dtype} labels (z, y, x) of {vz:g}×{vy:g}×{vx:g} mm, "

@@ -8,8 +8,10 @@ Each takes the value, the field's name and ``where`` (the file and table, e.g.
 from __future__ import annotations
 
 import math
+import numbers
 
 from .errors import ConfigError, GeometryError
+from .validate import show
 
 
 def only(table: dict, allowed: set, where: str) -> None:
@@ -25,40 +27,40 @@ def required(table: dict, key: str, where: str):
 
 
 def number(value, field: str, where: str, *, positive: bool = False, nonnegative: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ConfigError(f"{where}: {field} must be a number, got {value!r}")
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):  # numpy scalars too
+        raise ConfigError(f"{where}: {field} must be a number, got {show(value)}")
     if not math.isfinite(value):
-        raise ConfigError(f"{where}: {field} must be finite, got {value!r}")
+        raise ConfigError(f"{where}: {field} must be finite, got {show(value)}")
     if positive and value <= 0:
-        raise ConfigError(f"{where}: {field} must be > 0, got {value!r}")
+        raise ConfigError(f"{where}: {field} must be > 0, got {show(value)}")
     if nonnegative and value < 0:
-        raise ConfigError(f"{where}: {field} must be >= 0, got {value!r}")
+        raise ConfigError(f"{where}: {field} must be >= 0, got {show(value)}")
     return float(value)
 
 
 def string(value, field: str, where: str) -> str:
     if not isinstance(value, str) or not value:
-        raise ConfigError(f"{where}: {field} must be a non-empty string, got {value!r}")
+        raise ConfigError(f"{where}: {field} must be a non-empty string, got {show(value)}")
     return value
 
 
 def table(value, field: str, where: str) -> dict:
     if not isinstance(value, dict):
-        raise ConfigError(f"{where}: {field} must be a table ([{field}]), got {value!r}")
+        raise ConfigError(f"{where}: {field} must be a table ([{field}]), got {show(value)}")
     return value
 
 
 def integer(value, field: str, where: str, lo: int, hi: int | None = None) -> int:
     if isinstance(value, bool) or not isinstance(value, int) or value < lo or (hi is not None and value > hi):
         bounds = f">= {lo}" if hi is None else f"in [{lo}, {hi}]"
-        raise ConfigError(f"{where}: {field} must be an integer {bounds}, got {value!r}")
+        raise ConfigError(f"{where}: {field} must be an integer {bounds}, got {show(value)}")
     return value
 
 
 def vector(value, field: str, where: str, length: int | None, form: str, *, element=number, **limits) -> tuple:
     """An array of exactly ``length`` values (any non-empty array if None), each checked by ``element``."""
     if not isinstance(value, list) or not value or (length is not None and len(value) != length):
-        raise ConfigError(f"{where}: {field} must be {form}, got {value!r}")
+        raise ConfigError(f"{where}: {field} must be {form}, got {show(value)}")
     return tuple(element(x, f"{field}[{i}]", where, **limits) for i, x in enumerate(value))
 
 

@@ -21,7 +21,7 @@ from .detector import Detector
 class Radiograph:
     image: np.ndarray  # float32 (rows, cols): raw signal, transmission or line integral
     output: str
-    starved: int  # pixels clamped before −log (photon starvation), 0 for raw output
+    starved: int  # photon-starved pixels: clamped before −log, or a transmission that is 0 in float32; 0 for raw output
     bins: int  # energy bins used
     dropped: float  # share of the open-beam signal in the bins dropped (0 when none were)
 
@@ -79,5 +79,11 @@ def radiograph(lengths, materials, spectrum, detector: Detector, factor, *, outp
     flat = detector.blur(np.broadcast_to((photons * weights).sum() * np.asarray(factor, dtype=np.float64), raw.shape)) + detector.dark
     floor = 0.5 * float((photons * weights).sum() / photons.sum())  # half a mean detected photon
     normalised = beer_lambert.normalise(raw, flat, detector.dark, floor)
-    image = normalised.transmission if output == "transmission" else normalised.line_integral
-    return Radiograph(image.astype(np.float32), output, normalised.starved, len(energies), dropped)
+    image = (normalised.transmission if output == "transmission" else normalised.line_integral).astype(np.float32)
+    starved = normalised.starved
+    if output == "transmission":
+        # A transmission below float32's smallest subnormal (~1.4e-45) is stored as 0: as
+        # photon-starved as a clamped pixel (its −log is infinite), so it is counted with them.
+        clamped = np.asarray(raw, dtype=np.float64) - detector.dark <= 0  # counted by normalise already
+        starved += int(np.count_nonzero((image == 0) & ~clamped))
+    return Radiograph(image, output, starved, len(energies), dropped)
