@@ -76,8 +76,10 @@ def test_png_quicklook_is_view_0_summed_over_materials_with_z_up(rendered, refer
     with Image.open(png) as image:
         image.verify()
     with Image.open(png) as image:
-        assert image.format == "PNG" and image.mode == "L" and image.size == (320, 256)
-        pixels = np.asarray(image)
+        factor = int(image.text["upscale"])  # enlarged to >= 512 px, a scale-bar strip below
+        assert image.format == "PNG" and image.mode == "L" and factor == 2 and image.size[0] == 320 * factor
+        assert image.text["mm_per_pixel"].startswith("0.15 x 0.15") and "mm" in image.text["scale_bar"]
+        pixels = np.asarray(image)[: 256 * factor : factor, ::factor]
     total = reference[0].sum(axis=0)[::-1]  # picture row 0 = the highest detector row
     expected = np.round(255 * np.clip(total / total.max(), 0, 1)).astype(np.uint8)
     assert np.abs(pixels.astype(int) - expected).max() <= 1
@@ -238,7 +240,8 @@ def test_radiograph_metadata_describes_the_physics(radiograph_run, loaded_exampl
 def test_radiograph_png_is_view_0_with_z_up(radiograph_run):
     _, out, shots = radiograph_run
     with Image.open(out.with_suffix(".png")) as image:
-        pixels = np.asarray(image)
+        factor = int(image.text["upscale"])
+        pixels = np.asarray(image)[: 256 * factor : factor, ::factor]
     view0 = shots[0].image.astype(np.float64)[::-1]
     expected = np.round(255 * np.clip(view0 / view0.max(), 0, 1)).astype(np.uint8)
     assert pixels.shape == (256, 320) and np.abs(pixels.astype(int) - expected).max() <= 1

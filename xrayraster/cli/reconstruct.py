@@ -149,8 +149,9 @@ def run(args) -> int:
         "input": kind,
         "projections_file": str(args.projections),
     })
-    png = write_quicklook(quicklook_path(args.out), np.clip(vol.data[vol.data.shape[0] // 2], 0, None))
+    png = write_quicklook(quicklook_path(args.out), np.clip(vol.data[vol.data.shape[0] // 2], 0, None),
+                          volume.voxel_size[1:])
     print(f"{out}: {'×'.join(map(str, vol.data.shape))} voxels (z, y, x) of {vz:g}×{vy:g}×{vx:g} mm, "
-          f"{vol.unit}, range {vol.data.min():.4g} to {vol.data.max():.4g}, {stack.shape[0]} views, "
+          f"{vol.unit}, range {vol.data.min() + 0.0:.4g} to {vol.data.max() + 0.0:.4g}, {stack.shape[0]} views, "
           f"geometry from {source}, {seconds:.2f} s; central slice {png}")
     return 0

@@ -11,7 +11,7 @@ from ..core.choices import OVERLAP_MODES, RADIOGRAPH_OUTPUTS
 from ..core.errors import ConfigError
 from ..core.projections import Projections
 from ..io.scene_file import load_scene_file
-from ..io.tiff import write_projections, write_quicklook
+from ..io.tiff import pixel_size_mm, write_projections, write_quicklook
 from ..physics.detector import Detector
 from ..scene.materials import Material
 from ..simulate.renderer import Renderer
@@ -72,7 +72,7 @@ def _render_path_lengths(args) -> int:
         "renderer": driver,
         "scene_file": str(args.scene),
     }))
-    png = write_quicklook(quicklook_path(args.out), stack[0].sum(axis=0))
+    png = write_quicklook(quicklook_path(args.out), stack[0].sum(axis=0), pixel_size_mm(geometry), where="at the detector")
     print(
         f"{out}: {len(views)} view(s) × {len(scene.materials)} material(s) × {stack.shape[2]}×{stack.shape[3]} "
         f"px, max {stack.max():.4f} mm, {method} pass, {seconds:.2f} s on {driver}; quick-look {png}"
@@ -123,7 +123,7 @@ def _render_radiographs(args) -> int:
         "renderer": driver,
         "scene_file": str(args.scene),
     }))
-    png = write_quicklook(quicklook_path(args.out), stack[0])
+    png = write_quicklook(quicklook_path(args.out), stack[0], pixel_size_mm(geometry), where="at the detector")
     extras = []
     if args.noise:
         extras.append(f"noise seed {seed}")
@@ -131,7 +131,7 @@ def _render_radiographs(args) -> int:
         extras.append(f"{sum(starved)} starved pixel(s) clamped ({', '.join(map(str, starved))} per view)")
     print(
         f"{out}: {len(views)} view(s) × {stack.shape[1]}×{stack.shape[2]} px {output} radiograph"
-        f" [{units}], range {stack.min():.4g} to {stack.max():.4g}, {shots[0].bins} energy bins"
+        f" [{units}], range {stack.min() + 0.0:.4g} to {stack.max() + 0.0:.4g}, {shots[0].bins} energy bins"
         + "".join(f", {e}" for e in extras)
         + f", {method} pass, {seconds:.2f} s on {driver}; quick-look {png}"
     )

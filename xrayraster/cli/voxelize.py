@@ -55,7 +55,8 @@ def run(args) -> int:
         write_volume(shares, labels.fractions.transpose(1, 0, 2, 3), volume, channels="label", info={
             "quantity": f"share of each voxel owned by each label, from {args.fractions}³ sub-voxel centres",
             "channel_labels": list(labels.labels)})
-    png = write_quicklook(quicklook_path(args.out), labels.data[labels.data.shape[0] // 2].astype(np.float32))
+    png = write_quicklook(quicklook_path(args.out), labels.data[labels.data.shape[0] // 2].astype(np.float32),
+                          volume.voxel_size[1:])
     counts = np.bincount(labels.data.ravel())
     present = ", ".join(f"{k}: {counts[k]}" for k in np.flatnonzero(counts) if k)
     print(f"{out}: {'×'.join(map(str, labels.data.shape))} {labels.data.dtype} labels (z, y, x) of {vz:g}×{vy:g}×{vx:g} mm, "
