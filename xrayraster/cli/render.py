@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
-
-import numpy as np
 
 from ..core.choices import OVERLAP_MODES, RADIOGRAPH_OUTPUTS
 from ..core.errors import ConfigError
@@ -13,7 +12,6 @@ from ..core.projections import Projections
 from ..io.scene_file import load_scene_file
 from ..io.tiff import pixel_size_mm, write_projections, write_quicklook
 from ..physics.detector import Detector
-from ..scene.materials import Material
 from ..simulate.renderer import Renderer
 from .options import nonnegative_int, positive_int
 from .outputs import check_outputs, quicklook_path
@@ -51,27 +49,16 @@ def run(args) -> int:
     return _render_radiographs(args)
 
 
-def _material_name(material) -> str:
-    return material.name if isinstance(material, Material) else str(material)
-
-
 def _render_path_lengths(args) -> int:
     loaded = load_scene_file(args.scene)
     geometry, scene = loaded.geometry, loaded.scene
     views = parse_views(args.views, geometry.num_views)
     start = time.perf_counter()
     with Renderer(geometry, supersampling=args.supersampling, overlap=args.overlap) as renderer:
-        stack = np.stack([renderer.path_lengths(scene, v) for v in views])
-        method, driver = renderer.last_method, renderer.gl.renderer
+        projections = renderer.path_lengths_all(scene, views)
     seconds = time.perf_counter() - start
-    out = write_projections(args.out, Projections(stack, geometry[views], "path_length", "mm", {
-        "materials": [_material_name(m) for m in scene.materials],
-        "views": views,
-        "supersampling": args.supersampling,
-        "method": method,
-        "renderer": driver,
-        "scene_file": str(args.scene),
-    }))
+    stack, method, driver = projections.data, projections.provenance["method"], projections.provenance["renderer"]
+    out = write_projections(args.out, _with_scene_file(projections, args.scene))
     png = write_quicklook(quicklook_path(args.out), stack[0].sum(axis=0), pixel_size_mm(geometry), where="at the detector")
     print(
         f"{out}: {len(views)} view(s) × {len(scene.materials)} material(s) × {stack.shape[2]}×{stack.shape[3]} "
@@ -98,31 +85,12 @@ def _render_radiographs(args) -> int:
     views = parse_views(args.views, geometry.num_views)
     start = time.perf_counter()
     with Renderer(geometry, supersampling=args.supersampling, overlap=args.overlap) as renderer:
-        shots = [renderer.project(scene, spectrum, v, detector=detector, output=output, noise=args.noise, seed=seed)
-                 for v in views]
-        method, driver = renderer.last_method, renderer.gl.renderer
+        projections = renderer.project_all(scene, spectrum, views, detector=detector, output=output, noise=args.noise,
+                                           seed=seed)
     seconds = time.perf_counter() - start
-    stack = np.stack([shot.image for shot in shots])
-    starved = [shot.starved for shot in shots]
-    units = "1" if output != "raw" else "counts" if detector.counting else "keV deposited"
-    out = write_projections(args.out, Projections(stack, geometry[views], output, units, {
-        "materials": [_material_name(m) for m in scene.materials],
-        "material_compositions": [repr(m) for m in scene.materials],
-        "views": views,
-        "spectrum": spectrum.description,
-        "spectrum_photons_per_mm2_at_1m": spectrum.total,
-        "spectrum_bins": spectrum.n_bins,
-        "detector": repr(detector),
-        "bins_used": [shot.bins for shot in shots],
-        "dropped_signal_share": [shot.dropped for shot in shots],
-        "starved_pixels": starved,
-        "noise": bool(args.noise),
-        "seed": seed,
-        "supersampling": args.supersampling,
-        "method": method,
-        "renderer": driver,
-        "scene_file": str(args.scene),
-    }))
+    stack, units, facts = projections.data, projections.unit, projections.provenance
+    starved, method, driver = facts["starved_pixels"], facts["method"], facts["renderer"]
+    out = write_projections(args.out, _with_scene_file(projections, args.scene))
     png = write_quicklook(quicklook_path(args.out), stack[0], pixel_size_mm(geometry), where="at the detector")
     extras = []
     if args.noise:
@@ -131,10 +99,12 @@ def _render_radiographs(args) -> int:
         extras.append(f"{sum(starved)} starved pixel(s) clamped ({', '.join(map(str, starved))} per view)")
     print(
         f"{out}: {len(views)} view(s) × {stack.shape[1]}×{stack.shape[2]} px {output} radiograph"
-        f" [{units}], range {stack.min() + 0.0:.4g} to {stack.max() + 0.0:.4g}, {shots[0].bins} energy bins"
+        f" [{units}], range {stack.min() + 0.0:.4g} to {stack.max() + 0.0:.4g}, {facts['bins_used'][0]} energy bins"
         + "".join(f", {e}" for e in extras)
         + f", {method} pass, {seconds:.2f} s on {driver}; quick-look {png}"
     )
     return 0
 
 
+def _with_scene_file(projections: Projections, scene_file) -> Projections:
+    return dataclasses.replace(projections, provenance={**projections.provenance, "scene_file": str(scene_file)})
