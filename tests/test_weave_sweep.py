@@ -1,0 +1,328 @@
+"""The yarn mesher (xrayraster.weave.sweep) against independent facts: closed-form section areas and
+polygon convergence theory, exact prism volumes, Pappus, the helix's torsion, SciPy's spline, and
+trimesh's and manifold3d's own checks of every mesh."""
+
+from __future__ import annotations
+
+import math
+
+import manifold3d
+import numpy as np
+import pytest
+import trimesh
+
+from xrayraster.core.errors import XrayrasterError
+from xrayraster.weave.sweep import (
+    CubicSpline3,
+    SweepError,
+    ellipse,
+    ellipse_area,
+    lenticular,
+    lenticular_area,
+    polygon_area,
+    power_ellipse,
+    power_ellipse_area,
+    rotation_minimising_frames,
+    rounded_rectangle,
+    rounded_rectangle_area,
+    sample_path,
+    sweep,
+    yarn_mesh,
+)
+
+SECTIONS = {
+    "ellipse": (lambda k: ellipse(2.0, 0.8, k), ellipse_area(2.0, 0.8)),
+    "lenticular": (lambda k: lenticular(2.0, 0.6, k), lenticular_area(2.0, 0.6)),
+    "power_ellipse_n4": (lambda k: power_ellipse(2.0, 0.8, 4.0, k), power_ellipse_area(2.0, 0.8, 4.0)),
+    "power_ellipse_n1.5": (lambda k: power_ellipse(2.0, 0.8, 1.5, k), power_ellipse_area(2.0, 0.8, 1.5)),
+    "rounded_rectangle": (lambda k: rounded_rectangle(2.0, 0.8, 0.5, k), rounded_rectangle_area(2.0, 0.8, 0.5)),
+    "stadium": (lambda k: rounded_rectangle(2.0, 0.8, 1.0, k), rounded_rectangle_area(2.0, 0.8, 1.0)),
+}
+
+
+def check_closed_mesh(vertices, faces):
+    """Watertight, consistently wound, outward (positive volume), no degenerate triangles; manifold3d agrees."""
+    mesh = trimesh.Trimesh(vertices=vertices, faces=faces, process=False)
+    assert mesh.is_watertight
+    assert mesh.is_winding_consistent
+    assert mesh.volume > 0
+    assert np.all(mesh.area_faces > 0)
+    solid = manifold3d.Manifold(manifold3d.Mesh(vert_properties=np.asarray(vertices, np.float32),
+                                                tri_verts=np.asarray(faces, np.uint32)))
+    assert solid.status() == manifold3d.Error.NoError
+    assert solid.volume() == pytest.approx(mesh.volume, rel=1e-5)  # float32 in manifold3d
+    return mesh
+
+
+# ---------------------------------------------------------------------------- cross-sections
+
+
+def test_closed_form_areas_against_independent_formulas():
+    # power ellipse with n = 2 is the ellipse; n = 1 is the rhombus (area 2ab).
+    assert power_ellipse_area(2.0, 0.8, 2.0) == pytest.approx(ellipse_area(2.0, 0.8), rel=1e-14)
+    assert power_ellipse_area(2.0, 0.8, 1.0) == pytest.approx(2 * 1.0 * 0.4, rel=1e-14)
+    # a lens as tall as wide is the circle; the stadium 2 x 0.8 is a 1.2 x 0.8 box plus a disc of radius 0.4
+    assert lenticular_area(1.0, 1.0) == pytest.approx(math.pi / 4, rel=1e-14)
+    assert rounded_rectangle_area(2.0, 0.8, 1.0) == pytest.approx(1.2 * 0.8 + math.pi * 0.16, rel=1e-14)
+    # the lens by numerical integration of its upper arc
+    x = np.linspace(-1.0, 1.0, 200001)
+    radius = (1.0 + 0.09) / 0.6
+    upper = np.sqrt(radius**2 - x**2) - (radius - 0.3)
+    assert 2 * np.trapezoid(upper, x) == pytest.approx(lenticular_area(2.0, 0.6), rel=1e-9)
+
+
+@pytest.mark.parametrize("name", SECTIONS)
+def test_outline_is_ccw_centred_and_on_its_curve(name):
+    make, area = SECTIONS[name]
+    p = make(32)
+    assert p.shape == (32, 2) and p.dtype == np.float64
+    assert polygon_area(p) > 0
+    assert np.allclose(p.mean(axis=0), 0.0, atol=1e-12)
+    assert 0 < polygon_area(p) < area  # inscribed in a convex shape: polygon smaller
+
+
+def test_points_lie_on_their_curves():
+    p = power_ellipse(2.0, 0.8, 3.0, 40)
+    assert np.allclose(np.abs(p[:, 0] / 1.0) ** 3 + np.abs(p[:, 1] / 0.4) ** 3, 1.0, atol=1e-12)
+    p = ellipse(2.0, 0.8, 40)
+    assert np.allclose((p[:, 0] / 1.0) ** 2 + (p[:, 1] / 0.4) ** 2, 1.0, atol=1e-12)
+    p = lenticular(2.0, 0.6, 40)
+    radius = (1.0 + 0.09) / 0.6
+    centre = np.where(p[:, 1:2] >= 0, [0.0, 0.3 - radius], [0.0, radius - 0.3])
+    assert np.allclose(np.linalg.norm(p - centre, axis=1), radius, atol=1e-12)
+    assert np.any(np.all(np.isclose(p, [1.0, 0.0]), axis=1)) and np.any(np.all(np.isclose(p, [-1.0, 0.0]), axis=1))
+
+
+@pytest.mark.parametrize("name", SECTIONS)
+def test_polygon_area_converges_at_second_order(name):
+    """An inscribed polygon of a piecewise-smooth curve misses O(h^2) of the area: doubling k quarters it."""
+    make, area = SECTIONS[name]
+    errors = [abs(area - polygon_area(make(k))) for k in (32, 64, 128, 256)]
+    ratios = [errors[i] / errors[i + 1] for i in range(3)]
+    assert all(3.5 < r < 4.5 for r in ratios), ratios
+    assert errors[-1] / area < 2e-4
+
+
+def test_bad_sections_name_the_argument():
+    with pytest.raises(SweepError, match="width"):
+        ellipse(-1.0, 1.0)
+    with pytest.raises(SweepError, match="height"):
+        lenticular(1.0, 2.0)
+    with pytest.raises(SweepError, match="exponent"):
+        power_ellipse(1.0, 1.0, 0.0)
+    with pytest.raises(SweepError, match="corner_fraction"):
+        rounded_rectangle(1.0, 1.0, 0.0)
+    with pytest.raises(SweepError, match="multiple of 4"):
+        rounded_rectangle(1.0, 1.0, 0.5, 30)
+    with pytest.raises(XrayrasterError):
+        ellipse(1.0, 1.0, 2)
+    with pytest.raises(ValueError):
+        lenticular(1.0, 0.5, 7)
+
+
+# ---------------------------------------------------------------------------- spline
+
+
+def wavy_nodes():
+    x = np.linspace(0.0, 10.0, 9)
+    return np.column_stack([x, 0.6 * np.sin(0.9 * x), 0.4 * np.cos(1.3 * x)])
+
+
+@pytest.mark.parametrize("end_tangents", [None, ((1.0, 0.0, 0.0), (0.6, 0.8, 0.0))])
+def test_spline_interpolates_and_is_c2(end_tangents):
+    nodes = wavy_nodes()
+    spline = CubicSpline3(nodes, end_tangents)
+    assert np.allclose(spline(spline.knots), nodes, atol=1e-12)
+    h = 1e-4
+    inner = spline.knots[1:-1]
+    for derivative in (0, 1, 2):  # value, slope and curvature match from both sides of every inner knot
+        left = spline(inner - h, derivative)
+        right = spline(inner + h, derivative)
+        assert np.allclose(left, right, atol=5e-3), derivative
+    # numerically: second differences just left and just right of each knot agree to O(h)
+    d = 1e-3
+    second_left = (spline(inner, 0) - 2 * spline(inner - d, 0) + spline(inner - 2 * d, 0)) / d**2
+    second_right = (spline(inner + 2 * d, 0) - 2 * spline(inner + d, 0) + spline(inner, 0)) / d**2
+    assert np.allclose(second_left, second_right, atol=0.05)
+    # the third derivative does jump (it is a cubic spline, not a polynomial)
+    third = np.diff(spline.second, axis=0) / np.diff(spline.knots)[:, None]
+    assert np.max(np.abs(np.diff(third, axis=0))) > 1e-3
+    if end_tangents is None:
+        assert np.allclose(spline(spline.knots[[0, -1]], 2), 0.0, atol=1e-12)
+    else:
+        assert np.allclose(spline(spline.knots[[0, -1]], 1), np.array(end_tangents), atol=1e-12)
+
+
+@pytest.mark.parametrize("bc", ["natural", "clamped"])
+def test_spline_matches_scipy(bc):
+    interpolate = pytest.importorskip("scipy.interpolate")
+    nodes = wavy_nodes()
+    ends = ((1.0, 0.0, 0.0), (0.6, 0.8, 0.0))
+    spline = CubicSpline3(nodes, None if bc == "natural" else ends)
+    reference = interpolate.CubicSpline(spline.knots, nodes, bc_type="natural" if bc == "natural" else
+                                        ((1, np.array(ends[0])), (1, np.array(ends[1]))))
+    t = np.linspace(0.0, spline.knots[-1], 1001)
+    for derivative in (0, 1, 2):
+        assert np.allclose(spline(t, derivative), reference(t, derivative), atol=1e-10)
+
+
+def test_sampling_is_uniform_along_arc_length():
+    spline = CubicSpline3(wavy_nodes())
+    points, tangents, params = sample_path(spline, 8.0)
+    steps = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    length = steps.sum()
+    assert len(points) - 1 == math.ceil(length * 8.0 - 1e-6) or len(points) - 1 == math.ceil(length * 8.0)
+    assert np.ptp(steps) / steps.mean() < 1e-3
+    assert np.allclose(points, spline(params), atol=0)
+    assert np.allclose(points[[0, -1]], wavy_nodes()[[0, -1]], atol=1e-12)
+    assert np.allclose(np.linalg.norm(tangents, axis=1), 1.0, atol=1e-14)
+
+
+def test_spline_refuses_repeated_nodes():
+    with pytest.raises(SweepError, match="coincide"):
+        CubicSpline3([[0, 0, 0], [1, 0, 0], [1, 0, 0]])
+
+
+# ---------------------------------------------------------------------------- frames
+
+
+def helix(n, a=2.0, c=0.5, turns=3.0):
+    t = np.linspace(0.0, 2 * np.pi * turns, n)
+    points = np.column_stack([a * np.cos(t), a * np.sin(t), c * t])
+    tangents = np.column_stack([-a * np.sin(t), a * np.cos(t), np.full(n, c)]) / math.hypot(a, c)
+    return t, points, tangents
+
+
+def test_rmf_on_a_helix_is_orthonormal_and_turns_against_the_frenet_frame_by_the_torsion():
+    a, c = 2.0, 0.5
+    t, points, tangents = helix(4001, a, c)
+    frames = rotation_minimising_frames(points, tangents, up=None)
+    gram = np.einsum("nij,nkj->nik", frames, frames)
+    assert np.max(np.abs(gram - np.eye(3))) < 1e-12
+    assert np.allclose(np.linalg.det(frames), 1.0, atol=1e-12)
+    # An RMF normal r = cos(th) N + sin(th) B obeys th' = -torsion along arc length (r' parallel to T).
+    speed = math.hypot(a, c)
+    torsion = c / (a * a + c * c)
+    s = t * speed
+    frenet_n = np.column_stack([-np.cos(t), -np.sin(t), np.zeros_like(t)])
+    frenet_b = np.column_stack([c * np.sin(t), -c * np.cos(t), np.full_like(t, a)]) / speed
+    theta = np.unwrap(np.arctan2(np.einsum("ij,ij->i", frames[:, 2], frenet_b),
+                                 np.einsum("ij,ij->i", frames[:, 2], frenet_n)))
+    assert np.allclose(theta - theta[0], -torsion * s, atol=1e-6)
+
+
+def test_rmf_has_no_twist_along_a_planar_curve():
+    theta = np.linspace(0.0, 1.5 * np.pi, 300)
+    points = np.column_stack([3 * np.cos(theta) + theta, 2 * np.sin(theta), np.zeros_like(theta)])
+    spline_t = np.column_stack([-3 * np.sin(theta) + 1, 2 * np.cos(theta), np.zeros_like(theta)])
+    frames = rotation_minimising_frames(points, spline_t, up=(0.0, 0.0, 1.0))
+    assert np.max(np.abs(frames[:, 2] - [0.0, 0.0, 1.0])) < 1e-12  # height axis stays +z: zero twist
+    gram = np.einsum("nij,nkj->nik", frames, frames)
+    assert np.max(np.abs(gram - np.eye(3))) < 1e-12
+
+
+def test_up_starts_the_height_axis_and_must_cross_the_path():
+    points = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.3]])
+    tangents = np.array([[1.0, 0.0, 0.3], [1.0, 0.0, 0.3]])
+    frames = rotation_minimising_frames(points, tangents, up=(0, 0, 1))
+    assert frames[0, 2, 2] > 0.95 and abs(frames[0, 2, 1]) < 1e-15
+    with pytest.raises(SweepError, match="parallel"):
+        rotation_minimising_frames(points, [[0, 0, 1.0], [0, 0, 1.0]], up=(0, 0, 2))
+
+
+# ---------------------------------------------------------------------------- sweep
+
+
+@pytest.mark.parametrize("name", SECTIONS)
+def test_straight_yarn_volume_is_prism_exact(name):
+    make, smooth_area = SECTIONS[name]
+    outline = make(24)
+    nodes = np.array([[0.0, 0.0, 0.0], [2.5, 1.0, 0.5], [4.0, 1.6, 0.8], [10.0, 4.0, 2.0]])  # collinear, uneven
+    length = float(np.linalg.norm(nodes[-1] - nodes[0]))
+    mesh = yarn_mesh(nodes, outline, samples_per_mm=3.0)
+    check_closed_mesh(mesh.vertices, mesh.faces)
+    polygon = polygon_area(outline)
+    assert mesh.volume == pytest.approx(polygon * length, rel=1e-9)
+    # against the smooth section: off by exactly the polygon's area error, nothing more
+    assert abs(mesh.volume - smooth_area * length) <= (smooth_area - polygon) * length * (1 + 1e-9)
+
+
+def test_curved_yarn_is_closed_and_its_volume_obeys_pappus():
+    """A section swept round a planar arc of radius R through angle phi encloses A R phi (Pappus)."""
+    radius, phi, n = 5.0, 1.2 * np.pi, 400
+    t = np.linspace(0.0, phi, n)
+    points = np.column_stack([radius * np.cos(t), radius * np.sin(t), np.zeros(n)])
+    tangents = np.column_stack([-np.sin(t), np.cos(t), np.zeros(n)])
+    outline = lenticular(2.0, 0.6, 32)
+    frames = rotation_minimising_frames(points, tangents)
+    vertices, faces = sweep(points, outline, frames)
+    mesh = check_closed_mesh(vertices, faces)
+    # the faceted bend (sections joined across chords of n - 1 equal steps) scales Pappus by sin(d)/d,
+    # d = phi / (n - 1); measured exact to rounding
+    d = phi / (n - 1)
+    expected = polygon_area(outline) * radius * phi * math.sin(d) / d
+    assert mesh.volume == pytest.approx(expected, rel=1e-9)
+
+
+@pytest.mark.parametrize("make", [lambda: ellipse(1.2, 0.5, 20), lambda: power_ellipse(1.2, 0.5, 0.8, 24),
+                                  lambda: rounded_rectangle(1.2, 0.5, 1.0, 16)])
+def test_wavy_yarn_is_closed_manifold_and_outward(make):
+    mesh = yarn_mesh(wavy_nodes(), make(), samples_per_mm=6.0)
+    check_closed_mesh(mesh.vertices, mesh.faces)
+    assert len(mesh.vertices) == len(mesh.faces) // 2 + 2  # a genus-0 triangle surface: V = F/2 + 2
+
+
+def rings_in_order(vertices, frames, points, k):
+    """Every section lies strictly ahead of the previous section's plane: neighbouring sections do not cross."""
+    rings = vertices[: len(points) * k].reshape(len(points), k, 3)
+    ahead = np.einsum("nkj,nj->nk", rings[1:] - points[:-1, None], frames[:-1, 0])
+    behind = np.einsum("nkj,nj->nk", rings[:-1] - points[1:, None], frames[1:, 0])
+    return bool(np.all(ahead > 0) and np.all(behind < 0))
+
+
+def test_sharp_bend_within_the_limit_does_not_self_intersect_and_beyond_it_is_refused():
+    half_width = 1.0
+    outline = ellipse(2 * half_width, 0.5, 32)
+    for radius, ok in ((1.05 * half_width, True), (0.9 * half_width, False)):
+        t = np.linspace(0.0, np.pi / 2, 60)
+        points = np.column_stack([radius * np.cos(t), radius * np.sin(t), np.zeros_like(t)])
+        tangents = np.column_stack([-np.sin(t), np.cos(t), np.zeros_like(t)])
+        frames = rotation_minimising_frames(points, tangents)  # width axis lies in the bend's plane
+        if ok:
+            vertices, faces = sweep(points, outline, frames)
+            check_closed_mesh(vertices, faces)
+            assert rings_in_order(vertices, frames, points, len(outline))
+        else:
+            with pytest.raises(SweepError, match="bend radius must exceed the section's half-width"):
+                sweep(points, outline, frames)
+    # the same bend turned on edge: only the half-height (0.25 mm) must fit inside the radius
+    points = np.column_stack([0.9 * np.cos(t), np.zeros_like(t), 0.9 * np.sin(t)])
+    tangents = np.column_stack([-np.sin(t), np.zeros_like(t), np.cos(t)])
+    frames = rotation_minimising_frames(points, tangents, up=(-1.0, 0.0, 0.0))
+    vertices, faces = sweep(points, outline, frames)
+    check_closed_mesh(vertices, faces)
+    assert rings_in_order(vertices, frames, points, len(outline))
+
+
+def test_spline_yarn_through_a_tight_corner_is_refused_by_name():
+    nodes = np.array([[0.0, 0, 0], [2.0, 0, 0], [2.0, 2.0, 0]])  # the natural spline's tightest radius: 0.47 mm
+    with pytest.raises(SweepError, match=r"bends with radius .* mm"):
+        yarn_mesh(nodes, ellipse(2.0, 0.4, 16), samples_per_mm=10.0)
+    narrow = yarn_mesh(nodes, ellipse(0.8, 0.4, 16), samples_per_mm=10.0)  # half-width 0.4 mm fits the bend
+    check_closed_mesh(narrow.vertices, narrow.faces)
+
+
+def test_sweep_refuses_bad_inputs():
+    points = np.array([[0.0, 0, 0], [1.0, 0, 0]])
+    frames = rotation_minimising_frames(points, [[1.0, 0, 0], [1.0, 0, 0]])
+    with pytest.raises(SweepError, match="counter-clockwise"):
+        sweep(points, ellipse(1.0, 0.5, 12)[::-1], frames)
+    with pytest.raises(SweepError, match="frames"):
+        sweep(points, ellipse(1.0, 0.5, 12), frames[:1])
+    star = np.array([[1.0, 0], [0.1, 0.1], [0, 1], [-1, 0], [0.3, -0.05], [0, -1]])
+    assert polygon_area(star) > 0
+    with pytest.raises(SweepError, match="star-shaped"):
+        sweep(points, star, frames)
+    with pytest.raises(SweepError, match="degenerate"):
+        sweep(np.array([[0.0, 0, 0], [0.0, 0, 0], [1.0, 0, 0]]), ellipse(1.0, 0.5, 12),
+              np.repeat(frames[:1], 3, axis=0))

@@ -1,0 +1,468 @@
+"""The yarn mesher: closed cross-sections swept along a C² path with rotation-minimising frames.
+
+A yarn is a closed 2-D outline (its cross-section, in mm, in the section plane's (u, v) axes:
+``u`` along the yarn's width, ``v`` along its height) carried along a smooth centre line. The
+pieces, each usable on its own:
+
+- **Outlines** (:func:`ellipse`, :func:`lenticular`, :func:`power_ellipse`,
+  :func:`rounded_rectangle`): ``(k, 2)`` float64 points, counter-clockwise, centred on the
+  origin, with the exact area of the smooth shape beside each (``*_area``) so tessellation error
+  can be measured. Every one is convex or star-shaped about its centroid (the origin).
+- **Path** (:class:`CubicSpline3`): a cubic spline through ``(m, 3)`` nodes, natural or clamped,
+  parametrised by cumulative chord length; C² by construction. It is a small tridiagonal solve in
+  NumPy (Thomas algorithm; the system is diagonally dominant, so no pivoting is needed): SciPy is
+  not a dependency of the package. :func:`sample_path` places points on it at a near-uniform
+  spacing of ``1 / samples_per_mm`` along arc length (the points lie exactly on the spline; only
+  their spacing comes from a dense arc-length table).
+- **Frames** (:func:`rotation_minimising_frames`): the double-reflection method of Wang, Jüttler,
+  Zheng and Liu, "Computation of rotation minimizing frames", ACM Trans. Graph. 27(1), 2008. The
+  first frame's height axis is the ``up`` vector made perpendicular to the path, so a yarn that
+  starts horizontally starts with its height along +z.
+- **Sweep** (:func:`sweep`): the tube through the sections, capped at both ends by a fan from the
+  outline's centroid (valid because the outlines above are star-shaped about it; :func:`sweep`
+  checks that every fan triangle is positive, so a non-star outline is refused, not mis-meshed).
+  The result is watertight, 2-manifold, outward-oriented and free of degenerate triangles; every
+  triangle's area is checked after building.
+
+**Bend limit.** A section swept round a bend of radius ``R`` folds through itself on the inner
+side as soon as it reaches ``R`` or more toward the bend's centre: for a section centred on the
+path, the bend radius must exceed the section's half-width in the bending direction (its
+half-width or half-height, whichever lies in the plane of the bend). :func:`sweep` measures the
+radius at every sample (the circle through three consecutive path points) and raises
+:class:`SweepError` naming both numbers when this fails. It does not look for distant parts of
+one yarn meeting (a path that loops back on itself); yarn paths in a weave do not.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import trimesh
+
+from ..core.errors import XrayrasterError
+
+__all__ = [
+    "CubicSpline3",
+    "SweepError",
+    "ellipse",
+    "ellipse_area",
+    "lenticular",
+    "lenticular_area",
+    "polygon_area",
+    "power_ellipse",
+    "power_ellipse_area",
+    "rotation_minimising_frames",
+    "rounded_rectangle",
+    "rounded_rectangle_area",
+    "sample_path",
+    "sweep",
+    "yarn_mesh",
+]
+
+
+class SweepError(XrayrasterError, ValueError):
+    """A yarn cannot be swept as asked; the message names the argument and the fix."""
+
+
+# --------------------------------------------------------------------------------------------
+# Cross-sections
+# --------------------------------------------------------------------------------------------
+
+
+def _check_size(name: str, value) -> float:
+    value = float(value)
+    if not (math.isfinite(value) and value > 0):
+        raise SweepError(f"{name} must be a positive number of mm, got {value!r}")
+    return value
+
+
+def _check_k(k, minimum: int = 3, multiple: int = 1) -> int:
+    if isinstance(k, bool) or int(k) != k or k < minimum or k % multiple:
+        extra = f" and a multiple of {multiple}" if multiple > 1 else ""
+        raise SweepError(f"k (points per cross-section) must be an integer >= {minimum}{extra}, got {k!r}")
+    return int(k)
+
+
+def polygon_area(outline) -> float:
+    """Signed area (shoelace) of a closed 2-D outline, mm²; positive when counter-clockwise."""
+    p = np.asarray(outline, dtype=np.float64)
+    x, y = p[:, 0], p[:, 1]
+    return float(0.5 * (np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y)))
+
+
+def _polygon_centroid(p: np.ndarray) -> np.ndarray:
+    x, y = p[:, 0], p[:, 1]
+    xn, yn = np.roll(x, -1), np.roll(y, -1)
+    cross = x * yn - xn * y
+    area = 0.5 * cross.sum()
+    return np.array([((x + xn) * cross).sum(), ((y + yn) * cross).sum()]) / (6.0 * area)
+
+
+def ellipse(width: float, height: float, k: int = 32) -> np.ndarray:
+    """``k`` points on the ellipse of full ``width`` (along u) and ``height`` (along v), mm; CCW."""
+    a, b = _check_size("width", width) / 2, _check_size("height", height) / 2
+    t = 2.0 * np.pi * np.arange(_check_k(k)) / k
+    return np.column_stack([a * np.cos(t), b * np.sin(t)])
+
+
+def ellipse_area(width: float, height: float) -> float:
+    """Exact area of the smooth ellipse, mm²: π·(width/2)·(height/2)."""
+    return math.pi * width * height / 4.0
+
+
+def _lens_arc(width: float, height: float) -> tuple[float, float]:
+    """Radius and half-angle of each of the lens's two arcs (a = half-width, h = half-height)."""
+    a, h = width / 2, height / 2
+    radius = (a * a + h * h) / (2 * h)
+    return radius, math.atan2(a, radius - h)
+
+
+def lenticular(width: float, height: float, k: int = 32) -> np.ndarray:
+    """``k`` points (even) on a lens: two equal circular arcs meeting in corners at (±width/2, 0).
+
+    The upper arc passes through (0, height/2), the lower through (0, -height/2); ``height`` may
+    not exceed ``width`` (equal gives a circle). Each arc gets ``k/2`` points, corners included.
+    """
+    width, height = _check_size("width", width), _check_size("height", height)
+    if height > width:
+        raise SweepError(f"lenticular: height ({height} mm) may not exceed width ({width} mm); "
+                         "a lens taller than wide is not two arcs meeting at the sides")
+    k = _check_k(k, minimum=4, multiple=2)
+    radius, alpha = _lens_arc(width, height)
+    h = height / 2
+    theta = np.pi / 2 - alpha + 2 * alpha * np.arange(k // 2) / (k // 2)
+    upper = np.column_stack([radius * np.cos(theta), h - radius + radius * np.sin(theta)])
+    return np.concatenate([upper, -upper])  # the lower arc is the upper one turned by 180°
+
+
+def lenticular_area(width: float, height: float) -> float:
+    """Exact area of the lens, mm²: two circular segments, each R²·α − a·(R − h)."""
+    radius, alpha = _lens_arc(width, height)
+    return 2.0 * (radius * radius * alpha - (width / 2) * (radius - height / 2))
+
+
+def power_ellipse(width: float, height: float, exponent: float, k: int = 32) -> np.ndarray:
+    """``k`` points on |u/a|^n + |v/b|^n = 1 (a = width/2, b = height/2, n = ``exponent``); CCW.
+
+    n = 2 is the ellipse, n > 2 squarer, 1 < n < 2 pointed at the ends of the axes, n < 1 concave
+    (still star-shaped about the centre). Points at u = a·sgn(cos t)|cos t|^(2/n),
+    v = b·sgn(sin t)|sin t|^(2/n) for t uniform in [0, 2π). This is not TexGen's "power ellipse"
+    (which raises only the v coordinate to a power).
+    """
+    a, b = _check_size("width", width) / 2, _check_size("height", height) / 2
+    n = float(exponent)
+    if not (math.isfinite(n) and n > 0):
+        raise SweepError(f"power_ellipse: exponent must be a positive number, got {exponent!r}")
+    t = 2.0 * np.pi * np.arange(_check_k(k, minimum=4)) / k
+    c, s = np.cos(t), np.sin(t)
+    c[np.abs(c) < 1e-15] = 0.0  # cos(pi/2) is 6e-17, whose (2/n)th power is not small
+    s[np.abs(s) < 1e-15] = 0.0
+    return np.column_stack([a * np.sign(c) * np.abs(c) ** (2 / n), b * np.sign(s) * np.abs(s) ** (2 / n)])
+
+
+def power_ellipse_area(width: float, height: float, exponent: float) -> float:
+    """Exact area of the superellipse, mm²: 4ab·Γ(1 + 1/n)² / Γ(1 + 2/n)."""
+    n = float(exponent)
+    return width * height * math.gamma(1 + 1 / n) ** 2 / math.gamma(1 + 2 / n)
+
+
+def _corner_radius(width: float, height: float, corner_fraction: float) -> float:
+    f = float(corner_fraction)
+    if not (math.isfinite(f) and 0 < f <= 1):
+        raise SweepError(f"rounded_rectangle: corner_fraction must be in (0, 1], got {corner_fraction!r} "
+                         "(the corner radius as a fraction of half the smaller side)")
+    return f * min(width, height) / 2
+
+
+def rounded_rectangle(width: float, height: float, corner_fraction: float, k: int = 32) -> np.ndarray:
+    """``k`` points (a multiple of 4) on a rectangle with quarter-circle corners; CCW.
+
+    The corner radius is ``corner_fraction`` × half the smaller side (1 gives a stadium, or a
+    circle when width = height). Each corner arc gets k/4 points at the midpoints of k/4 equal
+    angular steps, so no two points coincide even when a straight side has zero length; the
+    straight sides are single chords (they are exact).
+    """
+    width, height = _check_size("width", width), _check_size("height", height)
+    r = _corner_radius(width, height, corner_fraction)
+    q = _check_k(k, minimum=4, multiple=4) // 4
+    cx, cy = width / 2 - r, height / 2 - r
+    step = (np.pi / 2) / q
+    parts = []
+    for corner, (sx, sy) in enumerate(((1, 1), (-1, 1), (-1, -1), (1, -1))):
+        theta = corner * np.pi / 2 + (np.arange(q) + 0.5) * step
+        parts.append(np.column_stack([sx * cx + r * np.cos(theta), sy * cy + r * np.sin(theta)]))
+    return np.concatenate(parts)
+
+
+def rounded_rectangle_area(width: float, height: float, corner_fraction: float) -> float:
+    """Exact area of the smooth rounded rectangle, mm²: width·height − (4 − π)·r²."""
+    r = _corner_radius(width, height, corner_fraction)
+    return width * height - (4 - math.pi) * r * r
+
+
+# --------------------------------------------------------------------------------------------
+# Path: a C² cubic spline through the nodes
+# --------------------------------------------------------------------------------------------
+
+
+class CubicSpline3:
+    """Cubic spline through ``(m, 3)`` nodes, parametrised by cumulative chord length (mm).
+
+    ``end_tangents=None`` gives the natural spline (zero second derivative at both ends);
+    ``end_tangents=(d0, d1)`` clamps the first derivative at the ends (with respect to the chord
+    length parameter, so pass unit vectors for unit speed). The second derivatives at the knots
+    solve the standard tridiagonal system (Thomas algorithm, all three coordinates at once).
+    """
+
+    def __init__(self, nodes, end_tangents=None):
+        nodes = np.asarray(nodes, dtype=np.float64)
+        if nodes.ndim != 2 or nodes.shape[1] != 3 or len(nodes) < 2:
+            raise SweepError(f"nodes must be an (m, 3) array with m >= 2, got shape {nodes.shape}")
+        if not np.all(np.isfinite(nodes)):
+            raise SweepError("nodes must be finite (a NaN or infinite coordinate)")
+        chords = np.linalg.norm(np.diff(nodes, axis=0), axis=1)
+        if np.any(chords <= 0):
+            i = int(np.argmin(chords))
+            raise SweepError(f"nodes {i} and {i + 1} coincide; consecutive path nodes must differ")
+        self.nodes = nodes
+        self.knots = np.concatenate([[0.0], np.cumsum(chords)])
+        self.second = self._solve(nodes, chords, end_tangents)
+
+    @staticmethod
+    def _solve(y: np.ndarray, h: np.ndarray, end_tangents) -> np.ndarray:
+        m = len(y)
+        lower, diag, upper = np.zeros(m), np.zeros(m), np.zeros(m)
+        rhs = np.zeros((m, 3))
+        slope = np.diff(y, axis=0) / h[:, None]
+        lower[1:-1], diag[1:-1], upper[1:-1] = h[:-1], 2 * (h[:-1] + h[1:]), h[1:]
+        rhs[1:-1] = 6 * (slope[1:] - slope[:-1])
+        if end_tangents is None:
+            diag[0] = diag[-1] = 1.0  # natural: M_0 = M_{m-1} = 0
+        else:
+            d0, d1 = (np.asarray(d, dtype=np.float64).reshape(3) for d in end_tangents)
+            diag[0], upper[0], rhs[0] = 2 * h[0], h[0], 6 * (slope[0] - d0)
+            lower[-1], diag[-1], rhs[-1] = h[-1], 2 * h[-1], 6 * (d1 - slope[-1])
+        # Thomas algorithm: forward elimination, back substitution.
+        c, d = np.zeros(m), np.zeros((m, 3))
+        c[0], d[0] = upper[0] / diag[0], rhs[0] / diag[0]
+        for i in range(1, m):
+            denom = diag[i] - lower[i] * c[i - 1]
+            c[i] = upper[i] / denom
+            d[i] = (rhs[i] - lower[i] * d[i - 1]) / denom
+        out = np.zeros((m, 3))
+        out[-1] = d[-1]
+        for i in range(m - 2, -1, -1):
+            out[i] = d[i] - c[i] * out[i + 1]
+        return out
+
+    @property
+    def length_parameter(self) -> float:
+        """The parameter's range (total chord length through the nodes), mm."""
+        return float(self.knots[-1])
+
+    def __call__(self, t, derivative: int = 0) -> np.ndarray:
+        """Points (or the 1st/2nd derivative) at parameters ``t``; ``(len(t), 3)``."""
+        t = np.atleast_1d(np.asarray(t, dtype=np.float64))
+        i = np.clip(np.searchsorted(self.knots, t, side="right") - 1, 0, len(self.knots) - 2)
+        t0, t1 = self.knots[i], self.knots[i + 1]
+        h = (t1 - t0)[:, None]
+        left, right = (t1 - t)[:, None], (t - t0)[:, None]
+        m0, m1 = self.second[i], self.second[i + 1]
+        y0, y1 = self.nodes[i], self.nodes[i + 1]
+        a, b = y0 / h - m0 * h / 6, y1 / h - m1 * h / 6
+        if derivative == 0:
+            return (m0 * left**3 + m1 * right**3) / (6 * h) + a * left + b * right
+        if derivative == 1:
+            return (m1 * right**2 - m0 * left**2) / (2 * h) + b - a
+        if derivative == 2:
+            return (m0 * left + m1 * right) / h
+        raise SweepError(f"derivative must be 0, 1 or 2, got {derivative!r}")
+
+
+def sample_path(spline: CubicSpline3, samples_per_mm: float, *, table_per_interval: int = 64):
+    """Points and unit tangents on ``spline`` about ``1 / samples_per_mm`` apart along arc length.
+
+    Returns ``(points, tangents, params)``: ``(n, 3)``, ``(n, 3)``, ``(n,)`` with n − 1 =
+    ceil(length × samples_per_mm) (at least 1). Both ends and every point lie exactly on the spline;
+    the spacing is uniform to the accuracy of a dense polyline arc-length table.
+    """
+    rate = float(samples_per_mm)
+    if not (math.isfinite(rate) and rate > 0):
+        raise SweepError(f"samples_per_mm must be a positive number, got {samples_per_mm!r}")
+    fine = np.concatenate([
+        np.linspace(spline.knots[i], spline.knots[i + 1], table_per_interval, endpoint=False)
+        for i in range(len(spline.knots) - 1)
+    ] + [spline.knots[-1:]])
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(spline(fine), axis=0), axis=1))])
+    intervals = max(1, math.ceil(arc[-1] * rate))
+    params = np.interp(np.linspace(0.0, arc[-1], intervals + 1), arc, fine)
+    params[0], params[-1] = spline.knots[0], spline.knots[-1]
+    tangents = spline(params, 1)
+    speed = np.linalg.norm(tangents, axis=1)
+    if np.any(speed <= 0):
+        raise SweepError("the path has a cusp (zero tangent); move the nodes apart or clamp its ends")
+    return spline(params), tangents / speed[:, None], params
+
+
+# --------------------------------------------------------------------------------------------
+# Rotation-minimising frames (double reflection, Wang et al. 2008)
+# --------------------------------------------------------------------------------------------
+
+
+def rotation_minimising_frames(points, tangents, up=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """Frames ``(n, 3, 3)`` along a sampled path: rows ``[T, U, V]`` per sample, right-handed.
+
+    T is the unit tangent, V the section's height axis, U = V × T its width axis (so U × V = T
+    and an outline counter-clockwise in (u, v) is counter-clockwise seen from ahead). The first V
+    is ``up`` made perpendicular to the first tangent (``up=None`` picks any perpendicular); the
+    rest follow by the double-reflection method, which has no twist beyond the path's own
+    (zero twist on a planar path) and is fourth-order accurate in the sample spacing.
+    """
+    x = np.asarray(points, dtype=np.float64)
+    t = np.asarray(tangents, dtype=np.float64)
+    t = t / np.linalg.norm(t, axis=1)[:, None]
+    n = len(x)
+    if up is None:
+        helper = np.eye(3)[int(np.argmin(np.abs(t[0])))]
+        r = helper - np.dot(helper, t[0]) * t[0]
+    else:
+        up_vec = np.asarray(up, dtype=np.float64).reshape(3)
+        r = up_vec - np.dot(up_vec, t[0]) * t[0]
+        if np.linalg.norm(r) <= 1e-9 * max(np.linalg.norm(up_vec), 1e-300):
+            raise SweepError(f"up {tuple(up_vec)} is parallel to the path's first tangent {tuple(t[0])}; "
+                             "choose an up vector across the yarn's start")
+    r = r / np.linalg.norm(r)
+    normals = np.empty((n, 3))
+    normals[0] = r
+    for i in range(n - 1):
+        v1 = x[i + 1] - x[i]
+        c1 = np.dot(v1, v1)
+        if c1 == 0:
+            normals[i + 1] = r
+            continue
+        r_l = r - (2 / c1) * np.dot(v1, r) * v1
+        t_l = t[i] - (2 / c1) * np.dot(v1, t[i]) * v1
+        v2 = t[i + 1] - t_l
+        c2 = np.dot(v2, v2)
+        r = r_l - (2 / c2) * np.dot(v2, r_l) * v2 if c2 > 0 else r_l
+        r = r - np.dot(r, t[i + 1]) * t[i + 1]  # removes rounding drift only (about 1e-16)
+        r = r / np.linalg.norm(r)
+        normals[i + 1] = r
+    frames = np.empty((n, 3, 3))
+    frames[:, 0] = t
+    frames[:, 2] = normals
+    frames[:, 1] = np.cross(normals, t)
+    return frames
+
+
+# --------------------------------------------------------------------------------------------
+# Sweep
+# --------------------------------------------------------------------------------------------
+
+
+def _check_bends(points: np.ndarray, frames: np.ndarray, outline: np.ndarray) -> None:
+    """Refuse a path that bends tighter than the section reaches toward the bend's centre."""
+    if len(points) < 3:
+        return
+    p0, p1, p2 = points[:-2], points[1:-1], points[2:]
+    a, b = p0 - p1, p2 - p1
+    axb = np.cross(a, b)
+    area2 = np.einsum("ij,ij->i", axb, axb)
+    bent = area2 > 1e-24 * (np.einsum("ij,ij->i", a, a) * np.einsum("ij,ij->i", b, b))
+    if not np.any(bent):
+        return
+    a, b, axb, area2, rows = a[bent], b[bent], axb[bent], area2[bent], np.nonzero(bent)[0] + 1
+    # circumcentre of (p0, p1, p2) relative to p1
+    to_centre = (np.cross(axb, a) * np.einsum("ij,ij->i", b, b)[:, None]
+                 + np.cross(b, axb) * np.einsum("ij,ij->i", a, a)[:, None]) / (2 * area2[:, None])
+    radius = np.linalg.norm(to_centre, axis=1)
+    inward = to_centre / radius[:, None]
+    # how far the section reaches toward the centre: max over outline of (u U + v V) · inward
+    du = np.einsum("ij,ij->i", frames[rows, 1], inward)
+    dv = np.einsum("ij,ij->i", frames[rows, 2], inward)
+    reach = (outline[:, 0][None, :] * du[:, None] + outline[:, 1][None, :] * dv[:, None]).max(axis=1)
+    bad = reach >= radius
+    if np.any(bad):
+        j = int(np.argmax(reach - radius))
+        along = float(np.sum(np.linalg.norm(np.diff(points[: rows[j] + 1], axis=0), axis=1)))
+        raise SweepError(
+            f"the yarn path bends with radius {radius[j]:.4g} mm at {along:.4g} mm along it, but the "
+            f"cross-section reaches {reach[j]:.4g} mm toward the bend's centre: the bend radius must exceed "
+            "the section's half-width in the bending direction, or the tube folds through itself. "
+            "Smooth the path (fewer or farther nodes) or make the yarn narrower")
+
+
+def sweep(path_points, outline, frames, cap: bool = True):
+    """The tube through ``outline`` placed at each path point in its frame: ``(vertices, faces)``.
+
+    ``path_points`` ``(n, 3)`` mm, n >= 2; ``outline`` ``(k, 2)`` counter-clockwise, in the section's
+    (u, v) axes; ``frames`` ``(n, 3, 3)`` rows [T, U, V] as :func:`rotation_minimising_frames`
+    gives. Section i's point j is ``P_i + u_j U_i + v_j V_i``. With ``cap`` both ends are closed by
+    a fan from the outline's centroid (the outline must be star-shaped about it, which is checked):
+    the mesh is then watertight, 2-manifold and outward-oriented. Returns float64 vertices
+    ``(n k + 2, 3)`` and int64 faces. Raises :class:`SweepError` for a bend tighter than the
+    section (see the module's bend limit) or a degenerate triangle.
+    """
+    points = np.asarray(path_points, dtype=np.float64)
+    shape = np.asarray(outline, dtype=np.float64)
+    frames = np.asarray(frames, dtype=np.float64)
+    if points.ndim != 2 or points.shape[1] != 3 or len(points) < 2:
+        raise SweepError(f"path_points must be (n, 3) with n >= 2, got shape {points.shape}")
+    if shape.ndim != 2 or shape.shape[1] != 2 or len(shape) < 3:
+        raise SweepError(f"outline must be (k, 2) with k >= 3, got shape {shape.shape}")
+    if frames.shape != (len(points), 3, 3):
+        raise SweepError(f"frames must be (n, 3, 3) = {(len(points), 3, 3)}, got {frames.shape}")
+    if not (np.all(np.isfinite(points)) and np.all(np.isfinite(shape)) and np.all(np.isfinite(frames))):
+        raise SweepError("path_points, outline and frames must be finite")
+    if polygon_area(shape) <= 0:
+        raise SweepError("outline must be counter-clockwise (positive area); reverse its points")
+    centroid = _polygon_centroid(shape)
+    rel = shape - centroid
+    fan = rel[:, 0] * np.roll(rel[:, 1], -1) - rel[:, 1] * np.roll(rel[:, 0], -1)
+    if cap and np.any(fan <= 0):
+        raise SweepError("outline is not star-shaped about its centroid, so a fan cannot cap it; "
+                         "use a convex or star-shaped cross-section")
+    _check_bends(points, frames, shape)
+
+    n, k = len(points), len(shape)
+    rings = (points[:, None, :] + shape[None, :, 0, None] * frames[:, None, 1]
+             + shape[None, :, 1, None] * frames[:, None, 2])
+    vertices = rings.reshape(-1, 3)
+    i = np.arange(n - 1)[:, None]
+    j = np.arange(k)[None, :]
+    a = i * k + j
+    b = i * k + (j + 1) % k
+    c = a + k
+    d = b + k
+    faces = [np.stack([a, b, d], axis=-1).reshape(-1, 3), np.stack([a, d, c], axis=-1).reshape(-1, 3)]
+    if cap:
+        ends = np.array([points[0], points[-1]]) + centroid[0] * frames[[0, -1], 1] + centroid[1] * frames[[0, -1], 2]
+        start, end = n * k, n * k + 1
+        jj = np.arange(k)
+        faces.append(np.column_stack([np.full(k, start), (jj + 1) % k, jj]))
+        faces.append(np.column_stack([np.full(k, end), (n - 1) * k + jj, (n - 1) * k + (jj + 1) % k]))
+        vertices = np.concatenate([vertices, ends])
+    faces = np.concatenate(faces).astype(np.int64)
+
+    tri = vertices[faces]
+    areas = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    scale = float(np.ptp(vertices, axis=0).max())
+    if not np.all(areas > 1e-14 * scale * scale):
+        raise SweepError(f"{int(np.count_nonzero(areas <= 1e-14 * scale * scale))} degenerate triangles in the "
+                         "swept yarn (repeated path points or outline points); remove the duplicates")
+    return vertices, faces
+
+
+def yarn_mesh(nodes, outline, samples_per_mm: float, up=(0.0, 0.0, 1.0), end_tangents=None) -> trimesh.Trimesh:
+    """A closed yarn: ``outline`` swept along the natural (or clamped) C² spline through ``nodes``.
+
+    The path is sampled at ``samples_per_mm`` along arc length, framed by rotation-minimising
+    frames whose height axis starts along ``up``, swept and capped. Returns an unprocessed
+    ``trimesh.Trimesh`` (the vertices and faces exactly as :func:`sweep` built them).
+    """
+    spline = CubicSpline3(nodes, end_tangents)
+    points, tangents, _ = sample_path(spline, samples_per_mm)
+    frames = rotation_minimising_frames(points, tangents, up)
+    vertices, faces = sweep(points, outline, frames, cap=True)
+    return trimesh.Trimesh(vertices=vertices, faces=faces, process=False)
