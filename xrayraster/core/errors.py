@@ -53,6 +53,10 @@ class ReconstructionError(XrayrasterError, ValueError):
     """Projections, geometry and volume do not make a reconstruction; the message says the fix."""
 
 
+class WeaveError(XrayrasterError, ValueError):
+    """A woven unit cell or sample cannot be made; the message names the field and the fix."""
+
+
 class GLContextError(XrayrasterError, RuntimeError):
     """No usable OpenGL context; the message says what to install."""
 

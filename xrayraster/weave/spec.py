@@ -1,0 +1,462 @@
+"""The unit cell of a layer-to-layer angle-interlock weave: what a user measures on the loom.
+
+Frame (mm): weft yarns run along x and are spaced along y; warp yarns (binders, and optional
+straight stuffers) run along y and are spaced along x; z is the thickness, weft layer 0 at the
+bottom. The cell spans ``[0, size[0]] × [0, size[1]] × [0, size[2]]`` and tiles in x and y.
+
+A binder's path is its *gap* at each weft column: gap ``g`` is the space between weft layers
+``g − 1`` and ``g``, so gap 0 lies below the bottom weft layer and gap ``weft_layers`` above the
+top one. Weft column ``j`` sits at ``y = (j + 0.5) · weft_spacing``. Every field, its unit and its
+default are documented in docs/weave.md; the dict form (:meth:`UnitCell.to_dict`) uses the same
+names as the ``[weave]`` table of a TOML file.
+"""
+
+from __future__ import annotations
+
+import numbers
+from dataclasses import dataclass
+from dataclasses import fields as dataclass_fields
+
+from ..core import fields
+from ..core.choices import check_choice
+from ..core.errors import ConfigError, WeaveError
+from ..core.validate import show
+
+__all__ = ["SECTION_SHAPES", "TEXTOMOS_KEYS", "Section", "TextomosImport", "UnitCell", "read_textomos"]
+
+SECTION_SHAPES = ("ellipse", "lenticular", "power_ellipse", "rounded_rectangle")
+_SHAPE_PARAMETER = {"power_ellipse": "exponent", "rounded_rectangle": "corner"}
+
+
+def _set(obj, name: str, value) -> None:
+    object.__setattr__(obj, name, value)
+
+
+def _number(name: str, value, *, lo: float | None = None, hi: float | None = None,
+            lo_open: bool = True, hi_open: bool = False, fix: str = "") -> float:
+    """A finite float within bounds, else a WeaveError naming ``name`` and ``fix``."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or value != value or abs(value) == float("inf"):
+        raise WeaveError(f"{name} must be a finite number, got {show(value)}")
+    x = float(value)
+    if lo is not None and (x < lo or (lo_open and x == lo)):
+        raise WeaveError(f"{name} must be {'>' if lo_open else '>='} {show(float(lo))}, got {show(x)}{fix}")
+    if hi is not None and (x > hi or (hi_open and x == hi)):
+        raise WeaveError(f"{name} must be {'<' if hi_open else '<='} {show(float(hi))}, got {show(x)}{fix}")
+    return x
+
+
+def _int(name: str, value, lo: int, fix: str = "") -> int:
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < lo:
+        raise WeaveError(f"{name} must be an integer >= {lo}, got {show(value)}{fix}")
+    return int(value)
+
+
+@dataclass(frozen=True)
+class Section:
+    """A yarn cross-section: its shape and the one number some shapes take.
+
+    ``ellipse`` and ``lenticular`` (two circular arcs meeting at the yarn's edges) take none.
+    ``power_ellipse`` takes ``exponent`` n > 0, the superellipse ``|x/a|^n + |z/b|^n = 1`` with
+    a, b half the width and height (n = 2 the ellipse, n > 2 squarer; not TexGen's power ellipse),
+    as :func:`xrayraster.weave.sweep.power_ellipse` draws it. ``rounded_rectangle`` takes
+    ``corner`` in (0, 1]: the corner radius as a fraction of half the smaller side (1 a stadium),
+    as :func:`xrayraster.weave.sweep.rounded_rectangle` draws it.
+    """
+
+    shape: str = "ellipse"
+    exponent: float | None = None
+    corner: float | None = None
+
+    def check(self, field: str) -> None:
+        """Validate, naming ``field`` (e.g. ``weft_section``) in the message."""
+        check_choice(self.shape, SECTION_SHAPES, f"{field}.shape", WeaveError)
+        wanted = _SHAPE_PARAMETER.get(self.shape)
+        for name in ("exponent", "corner"):
+            if name != wanted and getattr(self, name) is not None:
+                takes = f"takes only '{wanted}'" if wanted else "takes no parameter"
+                raise WeaveError(f"{field}.{name}: shape {self.shape!r} {takes}; remove {name}")
+        if self.shape == "power_ellipse":
+            if self.exponent is None:
+                raise WeaveError(f"{field}.exponent: a power_ellipse needs its exponent n > 0 "
+                                 "(|x/a|^n + |z/b|^n = 1; 2 is the ellipse, > 2 squarer)")
+            _set(self, "exponent", _number(f"{field}.exponent", self.exponent, lo=0.0,
+                                           fix=" (|x/a|^n + |z/b|^n = 1; 2 is the ellipse, > 2 squarer)"))
+        if self.shape == "rounded_rectangle":
+            if self.corner is None:
+                raise WeaveError(f"{field}.corner: a rounded_rectangle needs its corner radius fraction in (0, 1]")
+            _set(self, "corner", _number(f"{field}.corner", self.corner, lo=0.0, hi=1.0,
+                                         fix=" (the corner radius over half the smaller side; 1 a stadium)"))
+
+    def to_dict(self) -> dict:
+        out = {"shape": self.shape}
+        for name in ("exponent", "corner"):
+            if getattr(self, name) is not None:
+                out[name] = getattr(self, name)
+        return out
+
+    @classmethod
+    def from_dict(cls, d, field: str, where: str) -> "Section":
+        if isinstance(d, str):  # a bare shape name
+            d = {"shape": d}
+        if not isinstance(d, dict):
+            raise ConfigError(f"{where}: {field} must be a table like {{ shape = \"ellipse\" }}, got {show(d)}")
+        fields.only(d, {"shape", "exponent", "corner"}, f"{where} {field}")
+        kwargs = {"shape": fields.string(fields.required(d, "shape", f"{where} {field}"), f"{field}.shape", where)}
+        for name in ("exponent", "corner"):
+            if name in d:
+                kwargs[name] = fields.number(d[name], f"{field}.{name}", where)
+        return cls(**kwargs)
+
+
+@dataclass(frozen=True)
+class UnitCell:
+    """One repeat of a layer-to-layer angle-interlock weave; lengths in mm (docs/weave.md).
+
+    ``binders``, ``binder_position`` and ``binder_path`` left as None are generated: one binder per
+    adjacent weft-layer pair in every warp position (``warp_positions · (weft_layers − 1)`` binders),
+    binder ``b`` in position ``b % warp_positions`` linking weft layers ``k`` and ``k + 1`` with
+    ``k = (b // warp_positions) % (weft_layers − 1)``: over layer ``k + 1`` (gap ``k + 2``) for the
+    first half of the columns, under layer ``k`` (gap ``k``) for the second, the binders of one
+    position in phase and each position shifted by ``weft_per_layer / warp_positions`` columns.
+    """
+
+    weft_per_layer: int = 4
+    weft_layers: int = 5
+    warp_positions: int = 4
+    binders: int | None = None
+    binder_position: tuple[int, ...] | None = None
+    binder_path: tuple[tuple[int, ...], ...] | None = None
+    stuffers: int = 0
+    warp_spacing: float = 2.5
+    weft_spacing: float = 2.5
+    warp_width_fraction: float = 0.8
+    weft_width_fraction: float = 0.9
+    weft_share: float = 0.6
+    thickness: float = 4.0
+    weft_section: Section = Section("power_ellipse", exponent=3.0)
+    warp_section: Section = Section("lenticular")
+    margin_xy: float = 0.0
+    margin_z: float = 0.4
+
+    def __post_init__(self):
+        n = _int("weft_layers", self.weft_layers, 2, " (a layer-to-layer weave links at least two weft layers)")
+        w = _int("weft_per_layer", self.weft_per_layer, 1, " (weft yarns per layer in the cell)")
+        p = _int("warp_positions", self.warp_positions, 1, " (warp positions across the cell)")
+        for name in ("warp_spacing", "weft_spacing", "thickness"):
+            _set(self, name, _number(name, getattr(self, name), lo=0.0, fix=" mm"))
+        for name in ("warp_width_fraction", "weft_width_fraction"):
+            _set(self, name, _number(name, getattr(self, name), lo=0.0, hi=1.0,
+                                     fix=" (a yarn wider than its spacing overlaps its neighbour; "
+                                         "lower the fraction or widen the spacing)"))
+        _set(self, "weft_share", _number("weft_share", self.weft_share, lo=0.0, hi=1.0, hi_open=True,
+                                         fix=" (the weft's share of the yarn stack thickness)"))
+        for name in ("margin_xy", "margin_z"):
+            _set(self, name, _number(name, getattr(self, name), lo=0.0, lo_open=False, fix=" mm"))
+        stuffers = _int("stuffers", self.stuffers, 0)
+        if stuffers > n - 1:
+            raise WeaveError(f"stuffers must be <= weft_layers - 1 = {n - 1} (one per gap between weft layers), "
+                             f"got {stuffers}")
+        for name in ("weft_section", "warp_section"):
+            section = getattr(self, name)
+            if isinstance(section, str):
+                section = Section(section)
+            if not isinstance(section, Section):
+                raise WeaveError(f"{name} must be a Section (or a shape name), got {show(section)}")
+            section.check(name)
+            _set(self, name, section)
+        if self.thickness <= 2 * self.margin_z:
+            raise WeaveError(f"thickness ({show(self.thickness)} mm) must exceed 2 · margin_z "
+                             f"({show(2 * self.margin_z)} mm): no room is left for the yarns; "
+                             "raise thickness or lower margin_z")
+
+        b = self.binders
+        b = p * (n - 1) if b is None else _int("binders", b, 1, " (binder warp yarns per cell)")
+        _set(self, "binders", b)
+        _set(self, "binder_position", self._positions(b, p))
+        _set(self, "binder_path", self._paths(b, n, w, p))
+        self._check_room(n)
+
+    def _positions(self, b: int, p: int) -> tuple[int, ...]:
+        if self.binder_position is None:
+            return tuple(i % p for i in range(b))
+        pos = self.binder_position
+        if isinstance(pos, (str, bytes)) or not hasattr(pos, "__len__") or len(pos) != b:
+            raise WeaveError(f"binder_position must list one warp position per binder ({b}), got {show(pos)}")
+        out = []
+        for i, x in enumerate(pos):
+            x = _int(f"binder_position[{i}]", x, 0)
+            if x >= p:
+                raise WeaveError(f"binder_position[{i}] must be in 0..{p - 1} (warp_positions - 1), got {x}; "
+                                 "raise warp_positions or move the binder")
+            out.append(x)
+        return tuple(out)
+
+    def _paths(self, b: int, n: int, w: int, p: int) -> tuple[tuple[int, ...], ...]:
+        if self.binder_path is None:
+            return tuple(self._default_path(i, n, w, p) for i in range(b))
+        paths = self.binder_path
+        if isinstance(paths, (str, bytes)) or not hasattr(paths, "__len__") or len(paths) != b:
+            raise WeaveError(f"binder_path must hold one path per binder ({b}), got "
+                             f"{len(paths) if hasattr(paths, '__len__') else show(paths)}; give binders = the "
+                             "number of paths or one path per binder")
+        out = []
+        for i, path in enumerate(paths):
+            if isinstance(path, (str, bytes)) or not hasattr(path, "__len__") or len(path) != w:
+                raise WeaveError(f"binder_path[{i}] must give one gap per weft column ({w} = weft_per_layer), "
+                                 f"got {show(path)}")
+            gaps = []
+            for j, g in enumerate(path):
+                g = _int(f"binder_path[{i}][{j}]", g, 0, f" (gaps run 0..{n} = weft_layers)")
+                if g > n:
+                    raise WeaveError(f"binder_path[{i}][{j}] = {g} leaves the weft stack: gaps run 0 (below weft "
+                                     f"layer 0) to {n} (above the top layer, weft_layers = {n})")
+                gaps.append(g)
+            out.append(tuple(gaps))
+        return tuple(out)
+
+    @staticmethod
+    def _default_path(i: int, n: int, w: int, p: int) -> tuple[int, ...]:
+        k = (i // p) % (n - 1)           # links weft layers k and k + 1
+        shift = (i % p) * w // p         # positions staggered along the warp
+        half = (w + 1) // 2
+        return tuple(k + 2 if (j - shift) % w < half else k for j in range(w))
+
+    def _check_room(self, n: int) -> None:
+        """Binders of one position never share a gap in one column; surface loops fit in margin_z."""
+        for j in range(self.weft_per_layer):
+            seen = {}
+            for i, (pos, path) in enumerate(zip(self.binder_position, self.binder_path)):
+                other = seen.setdefault((pos, path[j]), i)
+                if other != i:
+                    raise WeaveError(f"binder_path: binders {other} and {i} share warp position {pos} and gap "
+                                     f"{path[j]} at weft column {j}; give one of them another gap or position")
+        surface = any(g in (0, n) for path in self.binder_path for g in path)
+        if surface and self.margin_z < self.warp_height - 1e-12:
+            h = self.warp_height
+            raise WeaveError(f"margin_z ({show(self.margin_z)} mm) is thinner than the binders ({h:.4g} mm "
+                             f"high) that binder_path loops over the outer weft layers (gap 0 or {n}): the "
+                             f"thickness is too small for the yarns; raise margin_z to >= {h:.4g} mm (and "
+                             "thickness with it) or lower weft_share")
+
+    # Derived values (mm) for the mesher.
+
+    @property
+    def warp_columns(self) -> int:
+        """Warp columns across x: binder positions, and stuffer columns between them when stuffers > 0."""
+        return self.warp_positions * (2 if self.stuffers else 1)
+
+    @property
+    def size(self) -> tuple[float, float, float]:
+        """Cell size (x, y, z) in mm; x and y are the periods, z the thickness with its margins."""
+        return (self.warp_columns * self.warp_spacing, self.weft_per_layer * self.weft_spacing, self.thickness)
+
+    @property
+    def stack_thickness(self) -> float:
+        """The weft layers and the binder gaps between them: thickness − 2 · margin_z (mm)."""
+        return self.thickness - 2 * self.margin_z
+
+    @property
+    def weft_width(self) -> float:
+        return self.weft_width_fraction * self.weft_spacing
+
+    @property
+    def warp_width(self) -> float:
+        return self.warp_width_fraction * self.warp_spacing
+
+    @property
+    def weft_height(self) -> float:
+        """weft_share of the stack, over the weft layers."""
+        return self.weft_share * self.stack_thickness / self.weft_layers
+
+    @property
+    def warp_height(self) -> float:
+        """The rest of the stack, over the weft_layers − 1 gaps between weft layers."""
+        return (1.0 - self.weft_share) * self.stack_thickness / (self.weft_layers - 1)
+
+    @property
+    def weft_layer_z(self) -> tuple[float, ...]:
+        """z of each weft layer's centre, bottom to top (mm)."""
+        pitch = self.weft_height + self.warp_height
+        return tuple(self.margin_z + self.weft_height / 2 + i * pitch for i in range(self.weft_layers))
+
+    def gap_z(self, gap: int) -> float:
+        """z of a warp yarn's centre in ``gap`` (0 below the bottom weft layer .. weft_layers above the top)."""
+        if isinstance(gap, bool) or not isinstance(gap, numbers.Integral) or not 0 <= gap <= self.weft_layers:
+            raise WeaveError(f"gap must be an integer in 0..{self.weft_layers}, got {show(gap)}")
+        return self.margin_z + gap * (self.weft_height + self.warp_height) - self.warp_height / 2
+
+    @property
+    def weft_y(self) -> tuple[float, ...]:
+        """y of each weft column's centre (mm)."""
+        return tuple((j + 0.5) * self.weft_spacing for j in range(self.weft_per_layer))
+
+    @property
+    def binder_x(self) -> tuple[float, ...]:
+        """x of each binder's centre (mm)."""
+        step = self.warp_columns // self.warp_positions
+        return tuple((step * p + 0.5) * self.warp_spacing for p in self.binder_position)
+
+    @property
+    def stuffer_x(self) -> tuple[float, ...]:
+        """x of each stuffer column's centre (mm), between binder positions; empty without stuffers."""
+        if not self.stuffers:
+            return ()
+        return tuple((2 * p + 1.5) * self.warp_spacing for p in range(self.warp_positions))
+
+    @property
+    def stuffer_gaps(self) -> tuple[int, ...]:
+        """The gaps the stuffers of every stuffer column lie in: 1..stuffers."""
+        return tuple(range(1, self.stuffers + 1))
+
+    # Dict form: the [weave] table.
+
+    def to_dict(self) -> dict:
+        """The dict form, TOML and JSON ready; generated fields are written out as generated."""
+        out = {}
+        for f in dataclass_fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, Section):
+                value = value.to_dict()
+            elif f.name == "binder_path":
+                value = [list(path) for path in value]
+            elif isinstance(value, tuple):
+                value = list(value)
+            out[f.name] = value
+        return out
+
+    @classmethod
+    def from_dict(cls, d: dict, where: str = "[weave]") -> "UnitCell":
+        """A unit cell from its dict form; errors name ``where`` and the field. Missing keys take defaults."""
+        d = fields.mapping(d, where)
+        fields.only(d, _KEYS, where)
+        kwargs = {}
+        for key in ("weft_per_layer", "weft_layers", "warp_positions", "binders"):
+            if key in d:
+                kwargs[key] = fields.integer(d[key], key, where, 1)
+        if "stuffers" in d:
+            kwargs["stuffers"] = fields.integer(d["stuffers"], "stuffers", where, 0)
+        for key in ("warp_spacing", "weft_spacing", "thickness"):
+            if key in d:
+                kwargs[key] = fields.number(d[key], key, where, positive=True)
+        for key in ("warp_width_fraction", "weft_width_fraction", "weft_share", "margin_xy", "margin_z"):
+            if key in d:
+                kwargs[key] = fields.number(d[key], key, where)
+        if "binder_position" in d:
+            kwargs["binder_position"] = fields.vector(d["binder_position"], "binder_position", where, None,
+                                                      "a list of warp positions, one a binder",
+                                                      element=fields.integer, lo=0)
+        if "binder_path" in d:
+            rows = d["binder_path"]
+            if not isinstance(rows, list) or not rows:
+                raise ConfigError(f"{where}: binder_path must be a list of paths (lists of gaps), one a binder, "
+                                  f"got {show(rows)}")
+            kwargs["binder_path"] = tuple(
+                fields.vector(r, f"binder_path[{i}]", where, None, "a list of gaps, one a weft column",
+                              element=fields.integer, lo=0)
+                for i, r in enumerate(rows))
+        for key in ("weft_section", "warp_section"):
+            if key in d:
+                kwargs[key] = Section.from_dict(d[key], key, where)
+        try:
+            return cls(**kwargs)
+        except WeaveError as exc:
+            raise ConfigError(f"{where}: {exc}") from None
+
+    @classmethod
+    def from_textomos(cls, d: dict, where: str = "textomos textile") -> "UnitCell":
+        """The unit cell of a textomos ``layer2layer`` textile section (docs/weave.md has the mapping).
+
+        Tiling, deformation and unit-cell shifts belong to the sample, not the cell:
+        :func:`read_textomos` returns them beside the cell.
+        """
+        return read_textomos(d, where).cell
+
+
+_KEYS = {f.name for f in dataclass_fields(UnitCell)}
+
+
+# textomos (Friemann et al., built on TexGen) layer-to-layer textile keys. Keys that describe the
+# cell map to UnitCell fields; the rest are returned as they are (sample-level) or ignored (files).
+_TEXTOMOS_CELL = ("unit_cell_weft_length", "unit_cell_warp_length", "unit_cell_thickness", "weft_yarns_per_layer",
+                  "warp_yarns_per_layer", "number_of_yarn_layers", "weft_width_to_spacing_ratio",
+                  "warp_width_to_spacing_ratio", "weft_to_warp_ratio")
+_TEXTOMOS_OPTIONAL = ("weave_type", "weave_pattern", "tiling", "deform", "shift_unit_cell", "textile_resolution",
+                      "cut_mesh", "mesh_paths")
+TEXTOMOS_KEYS = _TEXTOMOS_CELL + _TEXTOMOS_OPTIONAL
+
+
+@dataclass(frozen=True)
+class TextomosImport:
+    """What a textomos textile section describes: the cell, and the sample-level settings."""
+
+    cell: UnitCell
+    tiling: tuple[int, int, int] = (1, 1, 1)
+    deform: tuple[float, ...] = ()
+    shift_unit_cell: bool = False
+
+
+def read_textomos(d: dict, where: str = "textomos textile") -> TextomosImport:
+    """A textomos ``layer2layer`` textile section as a :class:`UnitCell` plus tiling, deform, shift.
+
+    Strict: keys outside :data:`TEXTOMOS_KEYS` are refused (pass the textile keys only, e.g.
+    ``{k: v for k, v in config.items() if k in TEXTOMOS_KEYS}``).
+    """
+    d = fields.mapping(d, where)
+    fields.only(d, set(TEXTOMOS_KEYS), where)
+    kind = d.get("weave_type", "layer2layer")
+    if kind != "layer2layer":
+        raise ConfigError(f"{where}: weave_type must be 'layer2layer' (the only textomos weave imported), got {show(kind)}")
+    v = {k: fields.required(d, k, where) for k in _TEXTOMOS_CELL}
+    length_x = fields.number(v["unit_cell_weft_length"], "unit_cell_weft_length", where, positive=True)
+    length_y = fields.number(v["unit_cell_warp_length"], "unit_cell_warp_length", where, positive=True)
+    stack = fields.number(v["unit_cell_thickness"], "unit_cell_thickness", where, positive=True)
+    w = fields.integer(v["weft_yarns_per_layer"], "weft_yarns_per_layer", where, 1)
+    p = fields.integer(v["warp_yarns_per_layer"], "warp_yarns_per_layer", where, 1)
+    layers = fields.integer(v["number_of_yarn_layers"], "number_of_yarn_layers", where, 1)
+    share = fields.number(v["weft_to_warp_ratio"], "weft_to_warp_ratio", where, positive=True)
+
+    # textomos: warp yarns stacked in every position, warp k resting between weft layers k and k+1
+    # (gap k + 1); each [warp, weft, ±1] pushes the whole stack of that position one gap up or down
+    # at that weft column (TexGen's CTextileWeave3D.PushUp / PushDown).
+    shift = [[0] * w for _ in range(p)]
+    pattern = d.get("weave_pattern", [])
+    if not isinstance(pattern, list):
+        raise ConfigError(f"{where}: weave_pattern must be a list of [warp, weft, 1 or -1], got {show(pattern)}")
+    for i, row in enumerate(pattern):
+        field = f"weave_pattern[{i}]"
+        if not isinstance(row, list) or len(row) != 3:
+            raise ConfigError(f"{where}: {field} must be [warp, weft, 1 or -1], got {show(row)}")
+        warp = fields.integer(row[0], f"{field}[0] (warp)", where, 0, p - 1)
+        weft = fields.integer(row[1], f"{field}[1] (weft)", where, 0, w - 1)
+        if isinstance(row[2], bool) or row[2] not in (1, -1):
+            raise ConfigError(f"{where}: {field}[2] must be 1 (push up) or -1 (push down), got {show(row[2])}")
+        shift[warp][weft] += row[2]
+    binders = p * layers
+    position = tuple(b % p for b in range(binders))
+    path = tuple(tuple(b // p + 1 + shift[b % p][j] for j in range(w)) for b in range(binders))
+    warp_height = (1.0 - share) * stack / layers if share < 1 else 0.0
+    surface = any(g <= 0 or g >= layers + 1 for row in path for g in row)
+    margin_z = warp_height if surface else 0.0
+    try:
+        cell = UnitCell(
+            weft_per_layer=w, weft_layers=layers + 1, warp_positions=p, binders=binders,
+            binder_position=position, binder_path=path,
+            warp_spacing=length_x / p, weft_spacing=length_y / w,
+            warp_width_fraction=fields.number(v["warp_width_to_spacing_ratio"], "warp_width_to_spacing_ratio", where),
+            weft_width_fraction=fields.number(v["weft_width_to_spacing_ratio"], "weft_width_to_spacing_ratio", where),
+            weft_share=share, thickness=stack + 2 * margin_z, margin_z=margin_z,
+            weft_section=Section("ellipse"), warp_section=Section("ellipse"),
+        )
+    except WeaveError as exc:
+        raise ConfigError(f"{where}: {exc} (in the imported cell; see docs/weave.md for the mapping)") from None
+
+    tiling = d.get("tiling", [1, 1, 1])
+    tiling = fields.vector(tiling, "tiling", where, 3, "[x, y, z] cell repeats", element=fields.integer, lo=1)
+    deform = d.get("deform", [])
+    if not isinstance(deform, list) or len(deform) not in (0, 12):
+        raise ConfigError(f"{where}: deform must be a list of 12 numbers (or empty), got {show(deform)}")
+    deform = tuple(fields.number(x, f"deform[{i}]", where, nonnegative=True) for i, x in enumerate(deform))
+    shift_cells = d.get("shift_unit_cell", False)
+    if not isinstance(shift_cells, bool):
+        raise ConfigError(f"{where}: shift_unit_cell must be true or false, got {show(shift_cells)}")
+    return TextomosImport(cell=cell, tiling=tiling, deform=deform, shift_unit_cell=shift_cells)
