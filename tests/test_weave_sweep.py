@@ -11,10 +11,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from xrayraster.core.errors import XrayrasterError
+from xrayraster.core.errors import WeaveError, XrayrasterError
 from xrayraster.weave.sweep import (
     CubicSpline3,
-    SweepError,
     ellipse,
     ellipse_area,
     lenticular,
@@ -104,15 +103,15 @@ def test_polygon_area_converges_at_second_order(name):
 
 
 def test_bad_sections_name_the_argument():
-    with pytest.raises(SweepError, match="width"):
+    with pytest.raises(WeaveError, match="width"):
         ellipse(-1.0, 1.0)
-    with pytest.raises(SweepError, match="height"):
+    with pytest.raises(WeaveError, match="height"):
         lenticular(1.0, 2.0)
-    with pytest.raises(SweepError, match="exponent"):
+    with pytest.raises(WeaveError, match="exponent"):
         power_ellipse(1.0, 1.0, 0.0)
-    with pytest.raises(SweepError, match="corner_fraction"):
+    with pytest.raises(WeaveError, match="corner_fraction"):
         rounded_rectangle(1.0, 1.0, 0.0)
-    with pytest.raises(SweepError, match="multiple of 4"):
+    with pytest.raises(WeaveError, match="multiple of 4"):
         rounded_rectangle(1.0, 1.0, 0.5, 30)
     with pytest.raises(XrayrasterError):
         ellipse(1.0, 1.0, 2)
@@ -179,7 +178,7 @@ def test_sampling_is_uniform_along_arc_length():
 
 
 def test_spline_refuses_repeated_nodes():
-    with pytest.raises(SweepError, match="coincide"):
+    with pytest.raises(WeaveError, match="coincide"):
         CubicSpline3([[0, 0, 0], [1, 0, 0], [1, 0, 0]])
 
 
@@ -226,7 +225,7 @@ def test_up_starts_the_height_axis_and_must_cross_the_path():
     tangents = np.array([[1.0, 0.0, 0.3], [1.0, 0.0, 0.3]])
     frames = rotation_minimising_frames(points, tangents, up=(0, 0, 1))
     assert frames[0, 2, 2] > 0.95 and abs(frames[0, 2, 1]) < 1e-15
-    with pytest.raises(SweepError, match="parallel"):
+    with pytest.raises(WeaveError, match="parallel"):
         rotation_minimising_frames(points, [[0, 0, 1.0], [0, 0, 1.0]], up=(0, 0, 2))
 
 
@@ -293,7 +292,7 @@ def test_sharp_bend_within_the_limit_does_not_self_intersect_and_beyond_it_is_re
             check_closed_mesh(vertices, faces)
             assert rings_in_order(vertices, frames, points, len(outline))
         else:
-            with pytest.raises(SweepError, match="bend radius must exceed the section's half-width"):
+            with pytest.raises(WeaveError, match="bend radius must exceed the section's half-width"):
                 sweep(points, outline, frames)
     # the same bend turned on edge: only the half-height (0.25 mm) must fit inside the radius
     points = np.column_stack([0.9 * np.cos(t), np.zeros_like(t), 0.9 * np.sin(t)])
@@ -306,7 +305,7 @@ def test_sharp_bend_within_the_limit_does_not_self_intersect_and_beyond_it_is_re
 
 def test_spline_yarn_through_a_tight_corner_is_refused_by_name():
     nodes = np.array([[0.0, 0, 0], [2.0, 0, 0], [2.0, 2.0, 0]])  # the natural spline's tightest radius: 0.47 mm
-    with pytest.raises(SweepError, match=r"bends with radius .* mm"):
+    with pytest.raises(WeaveError, match=r"bends with radius .* mm"):
         yarn_mesh(nodes, ellipse(2.0, 0.4, 16), samples_per_mm=10.0)
     narrow = yarn_mesh(nodes, ellipse(0.8, 0.4, 16), samples_per_mm=10.0)  # half-width 0.4 mm fits the bend
     check_closed_mesh(narrow.vertices, narrow.faces)
@@ -315,14 +314,14 @@ def test_spline_yarn_through_a_tight_corner_is_refused_by_name():
 def test_sweep_refuses_bad_inputs():
     points = np.array([[0.0, 0, 0], [1.0, 0, 0]])
     frames = rotation_minimising_frames(points, [[1.0, 0, 0], [1.0, 0, 0]])
-    with pytest.raises(SweepError, match="counter-clockwise"):
+    with pytest.raises(WeaveError, match="counter-clockwise"):
         sweep(points, ellipse(1.0, 0.5, 12)[::-1], frames)
-    with pytest.raises(SweepError, match="frames"):
+    with pytest.raises(WeaveError, match="frames"):
         sweep(points, ellipse(1.0, 0.5, 12), frames[:1])
     star = np.array([[1.0, 0], [0.1, 0.1], [0, 1], [-1, 0], [0.3, -0.05], [0, -1]])
     assert polygon_area(star) > 0
-    with pytest.raises(SweepError, match="star-shaped"):
+    with pytest.raises(WeaveError, match="star-shaped"):
         sweep(points, star, frames)
-    with pytest.raises(SweepError, match="degenerate"):
+    with pytest.raises(WeaveError, match="degenerate"):
         sweep(np.array([[0.0, 0, 0], [0.0, 0, 0], [1.0, 0, 0]]), ellipse(1.0, 0.5, 12),
               np.repeat(frames[:1], 3, axis=0))

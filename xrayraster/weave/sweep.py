@@ -29,7 +29,7 @@ side as soon as it reaches ``R`` or more toward the bend's centre: for a section
 path, the bend radius must exceed the section's half-width in the bending direction (its
 half-width or half-height, whichever lies in the plane of the bend). :func:`sweep` measures the
 radius at every sample (the circle through three consecutive path points) and raises
-:class:`SweepError` naming both numbers when this fails. It does not look for distant parts of
+:class:`WeaveError` naming both numbers when this fails. It does not look for distant parts of
 one yarn meeting (a path that loops back on itself); yarn paths in a weave do not.
 """
 
@@ -40,11 +40,10 @@ import math
 import numpy as np
 import trimesh
 
-from ..core.errors import XrayrasterError
+from ..core.errors import WeaveError
 
 __all__ = [
     "CubicSpline3",
-    "SweepError",
     "ellipse",
     "ellipse_area",
     "lenticular",
@@ -61,10 +60,6 @@ __all__ = [
 ]
 
 
-class SweepError(XrayrasterError, ValueError):
-    """A yarn cannot be swept as asked; the message names the argument and the fix."""
-
-
 # --------------------------------------------------------------------------------------------
 # Cross-sections
 # --------------------------------------------------------------------------------------------
@@ -73,14 +68,14 @@ class SweepError(XrayrasterError, ValueError):
 def _check_size(name: str, value) -> float:
     value = float(value)
     if not (math.isfinite(value) and value > 0):
-        raise SweepError(f"{name} must be a positive number of mm, got {value!r}")
+        raise WeaveError(f"{name} must be a positive number of mm, got {value!r}")
     return value
 
 
 def _check_k(k, minimum: int = 3, multiple: int = 1) -> int:
     if isinstance(k, bool) or int(k) != k or k < minimum or k % multiple:
         extra = f" and a multiple of {multiple}" if multiple > 1 else ""
-        raise SweepError(f"k (points per cross-section) must be an integer >= {minimum}{extra}, got {k!r}")
+        raise WeaveError(f"k (points per cross-section) must be an integer >= {minimum}{extra}, got {k!r}")
     return int(k)
 
 
@@ -126,7 +121,7 @@ def lenticular(width: float, height: float, k: int = 32) -> np.ndarray:
     """
     width, height = _check_size("width", width), _check_size("height", height)
     if height > width:
-        raise SweepError(f"lenticular: height ({height} mm) may not exceed width ({width} mm); "
+        raise WeaveError(f"lenticular: height ({height} mm) may not exceed width ({width} mm); "
                          "a lens taller than wide is not two arcs meeting at the sides")
     k = _check_k(k, minimum=4, multiple=2)
     radius, alpha = _lens_arc(width, height)
@@ -153,7 +148,7 @@ def power_ellipse(width: float, height: float, exponent: float, k: int = 32) -> 
     a, b = _check_size("width", width) / 2, _check_size("height", height) / 2
     n = float(exponent)
     if not (math.isfinite(n) and n > 0):
-        raise SweepError(f"power_ellipse: exponent must be a positive number, got {exponent!r}")
+        raise WeaveError(f"power_ellipse: exponent must be a positive number, got {exponent!r}")
     t = 2.0 * np.pi * np.arange(_check_k(k, minimum=4)) / k
     c, s = np.cos(t), np.sin(t)
     c[np.abs(c) < 1e-15] = 0.0  # cos(pi/2) is 6e-17, whose (2/n)th power is not small
@@ -170,7 +165,7 @@ def power_ellipse_area(width: float, height: float, exponent: float) -> float:
 def _corner_radius(width: float, height: float, corner_fraction: float) -> float:
     f = float(corner_fraction)
     if not (math.isfinite(f) and 0 < f <= 1):
-        raise SweepError(f"rounded_rectangle: corner_fraction must be in (0, 1], got {corner_fraction!r} "
+        raise WeaveError(f"rounded_rectangle: corner_fraction must be in (0, 1], got {corner_fraction!r} "
                          "(the corner radius as a fraction of half the smaller side)")
     return f * min(width, height) / 2
 
@@ -218,13 +213,13 @@ class CubicSpline3:
     def __init__(self, nodes, end_tangents=None):
         nodes = np.asarray(nodes, dtype=np.float64)
         if nodes.ndim != 2 or nodes.shape[1] != 3 or len(nodes) < 2:
-            raise SweepError(f"nodes must be an (m, 3) array with m >= 2, got shape {nodes.shape}")
+            raise WeaveError(f"nodes must be an (m, 3) array with m >= 2, got shape {nodes.shape}")
         if not np.all(np.isfinite(nodes)):
-            raise SweepError("nodes must be finite (a NaN or infinite coordinate)")
+            raise WeaveError("nodes must be finite (a NaN or infinite coordinate)")
         chords = np.linalg.norm(np.diff(nodes, axis=0), axis=1)
         if np.any(chords <= 0):
             i = int(np.argmin(chords))
-            raise SweepError(f"nodes {i} and {i + 1} coincide; consecutive path nodes must differ")
+            raise WeaveError(f"nodes {i} and {i + 1} coincide; consecutive path nodes must differ")
         self.nodes = nodes
         self.knots = np.concatenate([[0.0], np.cumsum(chords)])
         self.second = self._solve(nodes, chords, end_tangents)
@@ -277,7 +272,7 @@ class CubicSpline3:
             return (m1 * right**2 - m0 * left**2) / (2 * h) + b - a
         if derivative == 2:
             return (m0 * left + m1 * right) / h
-        raise SweepError(f"derivative must be 0, 1 or 2, got {derivative!r}")
+        raise WeaveError(f"derivative must be 0, 1 or 2, got {derivative!r}")
 
 
 def sample_path(spline: CubicSpline3, samples_per_mm: float, *, table_per_interval: int = 64):
@@ -289,7 +284,7 @@ def sample_path(spline: CubicSpline3, samples_per_mm: float, *, table_per_interv
     """
     rate = float(samples_per_mm)
     if not (math.isfinite(rate) and rate > 0):
-        raise SweepError(f"samples_per_mm must be a positive number, got {samples_per_mm!r}")
+        raise WeaveError(f"samples_per_mm must be a positive number, got {samples_per_mm!r}")
     fine = np.concatenate([
         np.linspace(spline.knots[i], spline.knots[i + 1], table_per_interval, endpoint=False)
         for i in range(len(spline.knots) - 1)
@@ -301,7 +296,7 @@ def sample_path(spline: CubicSpline3, samples_per_mm: float, *, table_per_interv
     tangents = spline(params, 1)
     speed = np.linalg.norm(tangents, axis=1)
     if np.any(speed <= 0):
-        raise SweepError("the path has a cusp (zero tangent); move the nodes apart or clamp its ends")
+        raise WeaveError("the path has a cusp (zero tangent); move the nodes apart or clamp its ends")
     return spline(params), tangents / speed[:, None], params
 
 
@@ -330,7 +325,7 @@ def rotation_minimising_frames(points, tangents, up=(0.0, 0.0, 1.0)) -> np.ndarr
         up_vec = np.asarray(up, dtype=np.float64).reshape(3)
         r = up_vec - np.dot(up_vec, t[0]) * t[0]
         if np.linalg.norm(r) <= 1e-9 * max(np.linalg.norm(up_vec), 1e-300):
-            raise SweepError(f"up {tuple(up_vec)} is parallel to the path's first tangent {tuple(t[0])}; "
+            raise WeaveError(f"up {tuple(up_vec)} is parallel to the path's first tangent {tuple(t[0])}; "
                              "choose an up vector across the yarn's start")
     r = r / np.linalg.norm(r)
     normals = np.empty((n, 3))
@@ -386,7 +381,7 @@ def _check_bends(points: np.ndarray, frames: np.ndarray, outline: np.ndarray) ->
     if np.any(bad):
         j = int(np.argmax(reach - radius))
         along = float(np.sum(np.linalg.norm(np.diff(points[: rows[j] + 1], axis=0), axis=1)))
-        raise SweepError(
+        raise WeaveError(
             f"the yarn path bends with radius {radius[j]:.4g} mm at {along:.4g} mm along it, but the "
             f"cross-section reaches {reach[j]:.4g} mm toward the bend's centre: the bend radius must exceed "
             "the section's half-width in the bending direction, or the tube folds through itself. "
@@ -401,27 +396,27 @@ def sweep(path_points, outline, frames, cap: bool = True):
     gives. Section i's point j is ``P_i + u_j U_i + v_j V_i``. With ``cap`` both ends are closed by
     a fan from the outline's centroid (the outline must be star-shaped about it, which is checked):
     the mesh is then watertight, 2-manifold and outward-oriented. Returns float64 vertices
-    ``(n k + 2, 3)`` and int64 faces. Raises :class:`SweepError` for a bend tighter than the
+    ``(n k + 2, 3)`` and int64 faces. Raises :class:`WeaveError` for a bend tighter than the
     section (see the module's bend limit) or a degenerate triangle.
     """
     points = np.asarray(path_points, dtype=np.float64)
     shape = np.asarray(outline, dtype=np.float64)
     frames = np.asarray(frames, dtype=np.float64)
     if points.ndim != 2 or points.shape[1] != 3 or len(points) < 2:
-        raise SweepError(f"path_points must be (n, 3) with n >= 2, got shape {points.shape}")
+        raise WeaveError(f"path_points must be (n, 3) with n >= 2, got shape {points.shape}")
     if shape.ndim != 2 or shape.shape[1] != 2 or len(shape) < 3:
-        raise SweepError(f"outline must be (k, 2) with k >= 3, got shape {shape.shape}")
+        raise WeaveError(f"outline must be (k, 2) with k >= 3, got shape {shape.shape}")
     if frames.shape != (len(points), 3, 3):
-        raise SweepError(f"frames must be (n, 3, 3) = {(len(points), 3, 3)}, got {frames.shape}")
+        raise WeaveError(f"frames must be (n, 3, 3) = {(len(points), 3, 3)}, got {frames.shape}")
     if not (np.all(np.isfinite(points)) and np.all(np.isfinite(shape)) and np.all(np.isfinite(frames))):
-        raise SweepError("path_points, outline and frames must be finite")
+        raise WeaveError("path_points, outline and frames must be finite")
     if polygon_area(shape) <= 0:
-        raise SweepError("outline must be counter-clockwise (positive area); reverse its points")
+        raise WeaveError("outline must be counter-clockwise (positive area); reverse its points")
     centroid = _polygon_centroid(shape)
     rel = shape - centroid
     fan = rel[:, 0] * np.roll(rel[:, 1], -1) - rel[:, 1] * np.roll(rel[:, 0], -1)
     if cap and np.any(fan <= 0):
-        raise SweepError("outline is not star-shaped about its centroid, so a fan cannot cap it; "
+        raise WeaveError("outline is not star-shaped about its centroid, so a fan cannot cap it; "
                          "use a convex or star-shaped cross-section")
     _check_bends(points, frames, shape)
 
@@ -449,7 +444,7 @@ def sweep(path_points, outline, frames, cap: bool = True):
     areas = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
     scale = float(np.ptp(vertices, axis=0).max())
     if not np.all(areas > 1e-14 * scale * scale):
-        raise SweepError(f"{int(np.count_nonzero(areas <= 1e-14 * scale * scale))} degenerate triangles in the "
+        raise WeaveError(f"{int(np.count_nonzero(areas <= 1e-14 * scale * scale))} degenerate triangles in the "
                          "swept yarn (repeated path points or outline points); remove the duplicates")
     return vertices, faces
 
