@@ -10,7 +10,7 @@ import pytest
 
 from xrayraster.core.errors import ConfigError, WeaveError, XrayrasterError
 from xrayraster.weave import Section, UnitCell, read_textomos
-from xrayraster.weave.spec import TEXTOMOS_KEYS
+from xrayraster.weave.textomos import TEXTOMOS_KEYS
 
 
 def test_derived_sizes_by_hand():
@@ -155,7 +155,7 @@ def _textomos():
 def test_textomos_mapping_by_hand():
     imported = read_textomos(_textomos())
     c = imported.cell
-    assert UnitCell.from_textomos(_textomos()) == c
+    assert read_textomos(_textomos()).cell == c
     assert (c.weft_per_layer, c.weft_layers, c.warp_positions, c.binders) == (4, 3, 4, 8)
     assert c.warp_spacing == pytest.approx(2.0) and c.weft_spacing == pytest.approx(1.5)  # 8/4, 6/4
     assert c.size[:2] == pytest.approx((8.0, 6.0))
@@ -176,7 +176,7 @@ def test_textomos_mapping_by_hand():
 def test_textomos_without_surface_loops_has_no_margin():
     d = _textomos()
     d["weave_pattern"] = []
-    c = UnitCell.from_textomos(d)
+    c = read_textomos(d).cell
     assert c.margin_z == 0.0 and c.thickness == 3.0 and set(c.binder_path) == {(1, 1, 1, 1), (2, 2, 2, 2)}
 
 

@@ -9,6 +9,8 @@ reconstructed volumes, as CT tools report it (``Volume.data`` with ``Volume.unit
 1 mm⁻¹ = 10 cm⁻¹). Mass attenuation μ/ρ is cm²/g and density g/cm³, as the tables give them.
 """
 
+# xr.weave.UnitCell, xr.weave.Sample: woven samples (needs no OpenGL)
+from . import weave
 from .core.errors import (
     ConfigError,
     GeometryError,
@@ -22,6 +24,7 @@ from .core.errors import (
     SceneError,
     SpectrumError,
     VoxelizeError,
+    WeaveError,
     XrayrasterError,
 )
 from .core.geometry import (
@@ -78,9 +81,11 @@ __all__ = [
     "Volume",
     "VoxelizeError",
     "VolumeGeometry",
+    "WeaveError",
     "XrayrasterError",
     "fdk",
     "full_circle",
     "load_mesh",
     "voxelize",
+    "weave",
 ]

@@ -1,0 +1,126 @@
+"""Regular woven samples (xrayraster.weave.sample): yarn paths, clipped meshes, the scene."""
+
+from __future__ import annotations
+
+import manifold3d
+import numpy as np
+import pytest
+
+import xrayraster as xr
+from xrayraster.core.errors import WeaveError
+from xrayraster.weave import Sample, UnitCell
+from xrayraster.weave.sweep import polygon_area
+
+COARSE = dict(points_per_section=12, samples_per_mm=2.0)
+
+
+@pytest.fixture(scope="module")
+def sample_2x1():
+    s = Sample(UnitCell(), cells=(2, 1), **COARSE)
+    return s, s.meshes()
+
+
+def _manifold_ok(mesh) -> bool:
+    solid = manifold3d.Manifold(manifold3d.Mesh64(
+        vert_properties=np.array(mesh.vertices, dtype=np.float64, order="C"),
+        tri_verts=np.array(mesh.faces, dtype=np.uint64, order="C")))
+    return solid.status() == manifold3d.Error.NoError and not solid.is_empty()
+
+
+@pytest.mark.parametrize("kwargs, field", [
+    (dict(cells=(0, 1)), "nx"), (dict(cells=(1, 0)), "ny"), (dict(cells=(1,)), "cells"),
+    (dict(layers_of_cells=0), "layers_of_cells"), (dict(points_per_section=10), "points_per_section"),
+    (dict(samples_per_mm=0.0), "samples_per_mm"),
+])
+def test_bad_counts_name_the_field(kwargs, field):
+    with pytest.raises(WeaveError, match=field):
+        Sample(UnitCell(), **kwargs)
+
+
+def test_yarn_counts_by_hand():
+    # default cell: 4 weft per layer, 5 layers, 4 positions x 4 layer pairs = 16 binders
+    s = Sample(UnitCell(), cells=(2, 3), layers_of_cells=2, **COARSE)
+    kinds = [y.kind for y in s.yarns()]
+    assert kinds.count("weft") == 4 * 5 * 3 * 2      # per layer x layers x ny x nz
+    assert kinds.count("binder") == 16 * 2 * 2       # per cell x nx x nz
+    assert kinds.count("stuffer") == 0
+    cell = UnitCell(weft_layers=4, stuffers=2, margin_z=0.5, thickness=4.2)  # 4 stuffer columns, 2 each
+    s = Sample(cell, cells=(3, 1), **COARSE)
+    kinds = [y.kind for y in s.yarns()]
+    assert kinds.count("stuffer") == 4 * 2 * 3
+    assert kinds.count("binder") == 4 * 3 * 3
+    assert kinds.count("weft") == 4 * 4
+
+
+def test_binder_path_is_continuous_and_follows_its_gaps():
+    cell = UnitCell()
+    s = Sample(cell, cells=(1, 2), **COARSE)
+    binders = [y for y in s.yarns() if y.kind == "binder"]
+    assert len(binders) == 16                        # one path per binder across both cells, not two
+    y0 = binders[0]
+    # by hand: weft height 0.6*3.2/5 = 0.384, warp height 0.4*3.2/4 = 0.32, pitch 0.704
+    gap_z = {0: 0.4 - 0.16, 2: 0.4 + 2 * 0.704 - 0.16}
+    path = (2, 2, 0, 0)                              # the default path of binder 0
+    inside = y0.nodes[1:-1]
+    assert len(inside) == 8                          # a node at each of the 8 weft columns
+    np.testing.assert_allclose(inside[:, 1], (np.arange(8) + 0.5) * 2.5)
+    np.testing.assert_allclose(inside[:, 2], [gap_z[path[j % 4]] for j in range(8)], atol=1e-12)
+    np.testing.assert_allclose(y0.nodes[:, 0], 1.25)
+    assert y0.nodes[0, 1] < 0 and y0.nodes[-1, 1] > 20.0  # runs past the box before the clip
+
+
+def test_every_mesh_is_closed_oriented_and_manifold(sample_2x1):
+    s, meshes = sample_2x1
+    for mesh in [s.matrix_mesh()] + [m for _, m in meshes]:
+        assert mesh.is_watertight and mesh.is_winding_consistent
+        assert mesh.volume > 0
+        assert _manifold_ok(mesh)
+
+
+def test_yarns_lie_inside_the_box(sample_2x1):
+    s, meshes = sample_2x1
+    lo, hi = s.box
+    np.testing.assert_allclose(s.box, [[0, 0, 0], [20, 10, 4]])
+    for _, mesh in meshes:
+        assert np.all(mesh.bounds[0] >= lo - 1e-9) and np.all(mesh.bounds[1] <= hi + 1e-9)
+    # every weft and every binder is cut flush by both end faces of the box
+    for yarn, mesh in meshes:
+        axis = 0 if yarn.kind == "weft" else 1
+        assert abs(mesh.bounds[0, axis] - lo[axis]) < 1e-12 and abs(mesh.bounds[1, axis] - hi[axis]) < 1e-12
+
+
+def test_straight_weft_volume_is_the_prism(sample_2x1):
+    s, meshes = sample_2x1
+    wefts = [(y, m) for y, m in meshes if y.kind == "weft"]
+    for yarn, mesh in wefts:
+        expected = polygon_area(yarn.outline) * 20.0          # clipped length = nx * 10 mm
+        assert abs(mesh.volume - expected) <= 1e-9 * expected
+
+
+def test_stuffer_volume_is_the_prism():
+    cell = UnitCell(weft_layers=3, stuffers=1, weft_share=0.8, warp_section="ellipse")
+    s = Sample(cell, cells=(1, 1), **COARSE)
+    stuffers = [(y, m) for y, m in s.meshes() if y.kind == "stuffer"]
+    assert len(stuffers) == 4
+    for yarn, mesh in stuffers:
+        expected = polygon_area(yarn.outline) * cell.size[1]
+        assert abs(mesh.volume - expected) <= 1e-9 * expected
+        assert mesh.is_watertight and mesh.is_winding_consistent
+
+
+def test_scene_labels_priorities_and_materials():
+    s = Sample(UnitCell(), cells=(1, 1), **COARSE)
+    scene = s.scene()
+    by_name = {o.name: o for o in scene.objects}
+    assert len(scene) == 1 + 20 + 16
+    assert by_name["matrix"].label == 1 and by_name["matrix"].priority == 0
+    families = {"weft": (2, 1), "binder": (3, 2)}
+    for o in scene.objects[1:]:
+        label, priority = families[o.name.split("_")[0]]
+        assert (o.label, o.priority) == (label, priority)
+    assert scene.materials == ("matrix", "weft", "warp")
+    carbon = xr.Material("carbon", ((6, 1.0),), 1.8)
+    scene = s.scene({"weft": carbon})
+    assert scene.materials == ("matrix", carbon, "warp")
+    with pytest.raises(WeaveError, match="unknown families"):
+        s.scene({"resin": "x"})

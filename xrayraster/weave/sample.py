@@ -1,0 +1,215 @@
+"""Regular samples: ``nx × ny × nz`` unit cells as one box of matrix and continuous yarn meshes.
+
+Axes (mm), as in :mod:`xrayraster.weave.spec`: weft yarns run along **x** and are spaced along
+**y**; warp yarns (binders and stuffers) run along **y** and are spaced along **x**; **z** is the
+thickness, the bottom cell's weft layer 0 lowest. Cell ``(cx, cy, cz)`` occupies
+``[cx·size_x, (cx+1)·size_x] × [cy·size_y, (cy+1)·size_y] × [cz·thickness, (cz+1)·thickness]``,
+so the yarns fill ``[0, nx·size_x] × [0, ny·size_y] × [0, nz·thickness]``; the matrix box is that
+box grown by ``margin_xy`` in x and y (the cell's ``margin_z`` is already inside its thickness).
+
+Every yarn is one path across the whole sample, not one per cell: a weft is a straight line along
+x at its column's y and its layer's z; a binder has a node at every weft column of every cell it
+crosses, at the height of its gap there (``gap_z``), so it passes over and under the wefts and the
+spline runs on smoothly across cell borders; a stuffer is a straight line along y in its gap.
+Paths start and end one node (a weft spacing, or ``extend`` mm for straight yarns) outside the box,
+so the tube's end caps lie outside and the clip to the box (manifold3d, in double precision) leaves
+flat, closed cut faces exactly on the box's faces.
+
+No distortions yet: this is the regular weave. Yarns may touch or cut into each other (as
+TexGen's do); the scene's priorities (warp over weft over matrix) resolve the shared space.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+
+from ..core.errors import WeaveError
+from ..core.validate import show
+from ..scene.scene import Scene
+from .spec import Section, UnitCell
+from .sweep import ellipse, lenticular, power_ellipse, rounded_rectangle, yarn_mesh
+
+__all__ = ["LABELS", "PRIORITIES", "Sample", "Yarn", "section_outline"]
+
+LABELS = {"matrix": 1, "weft": 2, "warp": 3}
+PRIORITIES = {"matrix": 0, "weft": 1, "warp": 2}
+
+
+def section_outline(section: Section, width: float, height: float, k: int) -> np.ndarray:
+    """The ``(k, 2)`` outline (mm) of ``section`` for a yarn ``width`` × ``height``."""
+    if section.shape == "ellipse":
+        return ellipse(width, height, k)
+    if section.shape == "lenticular":
+        return lenticular(width, height, k)
+    if section.shape == "power_ellipse":
+        return power_ellipse(width, height, section.exponent, k)
+    if section.shape == "rounded_rectangle":
+        return rounded_rectangle(width, height, section.corner, k)
+    raise WeaveError(f"unknown section shape {section.shape!r}")  # pragma: no cover (Section checks)
+
+
+@dataclass(frozen=True)
+class Yarn:
+    """One yarn of a sample: its family (``weft`` or ``warp``), kind, centre-line nodes (mm) and outline."""
+
+    name: str
+    family: str
+    kind: str  # "weft", "binder" or "stuffer"
+    nodes: np.ndarray
+    outline: np.ndarray
+
+
+def _count(name: str, value) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise WeaveError(f"{name} must be an integer >= 1, got {show(value)}")
+    return int(value)
+
+
+def _to_manifold(mesh: trimesh.Trimesh):
+    import manifold3d
+
+    solid = manifold3d.Manifold(manifold3d.Mesh64(
+        vert_properties=np.array(mesh.vertices, dtype=np.float64, order="C"),
+        tri_verts=np.array(mesh.faces, dtype=np.uint64, order="C")))
+    if solid.status() != manifold3d.Error.NoError:
+        raise WeaveError(f"manifold3d cannot read a yarn mesh ({solid.status()})")
+    return solid
+
+
+def _from_manifold(solid) -> trimesh.Trimesh:
+    out = solid.to_mesh64()
+    return trimesh.Trimesh(vertices=np.array(np.asarray(out.vert_properties)[:, :3], dtype=np.float64),
+                           faces=np.array(out.tri_verts, dtype=np.int64), process=False)
+
+
+@dataclass(frozen=True)
+class Sample:
+    """``cells = (nx, ny)`` unit cells side by side and ``layers_of_cells`` stacked: the regular weave.
+
+    ``points_per_section`` is the outline's point count (a multiple of 4, so every shape takes it);
+    ``samples_per_mm`` the path samples per mm of yarn. ``extend`` (mm) is how far straight yarns
+    reach past the box before the clip.
+    """
+
+    cell: UnitCell
+    cells: tuple[int, int] = (1, 1)
+    layers_of_cells: int = 1
+    points_per_section: int = 24
+    samples_per_mm: float = 4.0
+    extend: float = 0.5
+
+    def __post_init__(self):
+        if not isinstance(self.cell, UnitCell):
+            raise WeaveError(f"cell must be a UnitCell, got {show(self.cell)}")
+        cells = self.cells
+        if isinstance(cells, (str, bytes)) or not hasattr(cells, "__len__") or len(cells) != 2:
+            raise WeaveError(f"cells must be (nx, ny), two counts of unit cells, got {show(cells)}")
+        object.__setattr__(self, "cells", (_count("cells[0] (nx)", cells[0]), _count("cells[1] (ny)", cells[1])))
+        object.__setattr__(self, "layers_of_cells", _count("layers_of_cells", self.layers_of_cells))
+        k = self.points_per_section
+        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 8 or k % 4:
+            raise WeaveError(f"points_per_section must be an integer >= 8 and a multiple of 4, got {show(k)}")
+        rate = self.samples_per_mm
+        if isinstance(rate, bool) or not isinstance(rate, (int, float)) or not (0 < rate < float("inf")):
+            raise WeaveError(f"samples_per_mm must be a positive number, got {show(rate)}")
+        ext = self.extend
+        if isinstance(ext, bool) or not isinstance(ext, (int, float)) or not (0 < ext < float("inf")):
+            raise WeaveError(f"extend must be a positive number of mm, got {show(ext)}")
+
+    # Geometry ---------------------------------------------------------------------------
+
+    @property
+    def yarn_box(self) -> np.ndarray:
+        """``(2, 3)`` min/max corners (mm) the yarns are clipped to."""
+        sx, sy, sz = self.cell.size
+        nx, ny = self.cells
+        return np.array([[0.0, 0.0, 0.0], [nx * sx, ny * sy, self.layers_of_cells * sz]])
+
+    @property
+    def box(self) -> np.ndarray:
+        """``(2, 3)`` min/max corners (mm) of the matrix: the yarn box grown by ``margin_xy`` in x and y."""
+        m = self.cell.margin_xy
+        return self.yarn_box + np.array([[-m, -m, 0.0], [m, m, 0.0]])
+
+    def yarns(self) -> list[Yarn]:
+        """Every yarn's centre-line nodes and outline, wefts first (bottom to top), then warps."""
+        c = self.cell
+        sx, sy, sz = c.size
+        nx, ny = self.cells
+        nz = self.layers_of_cells
+        k = self.points_per_section
+        x_end = nx * sx
+        weft = section_outline(c.weft_section, c.weft_width, c.weft_height, k)
+        warp = section_outline(c.warp_section, c.warp_width, c.warp_height, k)
+        out: list[Yarn] = []
+        for cz in range(nz):
+            for layer, z in enumerate(c.weft_layer_z):
+                for cy in range(ny):
+                    for j, y in enumerate(c.weft_y):
+                        nodes = np.array([[-self.extend, cy * sy + y, cz * sz + z],
+                                          [x_end + self.extend, cy * sy + y, cz * sz + z]])
+                        out.append(Yarn(f"weft_c{cz}_l{layer}_y{cy * c.weft_per_layer + j}", "weft", "weft",
+                                        nodes, weft))
+        w = c.weft_per_layer
+        # binder nodes: one per weft column over all cells, plus one periodic column past each end
+        columns = np.arange(-1, ny * w + 1)
+        ys = (columns + 0.5) * c.weft_spacing
+        for cz in range(nz):
+            for cx in range(nx):
+                for b, (x, path) in enumerate(zip(c.binder_x, c.binder_path)):
+                    zs = np.array([c.gap_z(path[j % w]) for j in columns]) + cz * sz
+                    nodes = np.column_stack([np.full(len(ys), cx * sx + x), ys, zs])
+                    out.append(Yarn(f"binder_c{cz}_x{cx}_b{b}", "warp", "binder", nodes, warp))
+                for s, x in enumerate(c.stuffer_x):
+                    for g in c.stuffer_gaps:
+                        z = c.gap_z(g) + cz * sz
+                        nodes = np.array([[cx * sx + x, -self.extend, z], [cx * sx + x, ny * sy + self.extend, z]])
+                        out.append(Yarn(f"stuffer_c{cz}_x{cx}_s{s}_g{g}", "warp", "stuffer", nodes, warp))
+        return out
+
+    # Meshes -----------------------------------------------------------------------------
+
+    def matrix_mesh(self) -> trimesh.Trimesh:
+        """The matrix: the sample box, a closed outward-oriented box mesh."""
+        lo, hi = self.box
+        return trimesh.creation.box(bounds=np.array([lo, hi]))
+
+    def meshes(self) -> list[tuple[Yarn, trimesh.Trimesh]]:
+        """Each yarn swept (``yarn_mesh``) and clipped exactly to the yarn box (manifold3d, float64)."""
+        import manifold3d
+
+        lo, hi = self.yarn_box
+        clip = manifold3d.Manifold.cube(tuple(hi - lo)).translate(tuple(lo))
+        out = []
+        for yarn in self.yarns():
+            tube = yarn_mesh(yarn.nodes, yarn.outline, self.samples_per_mm)
+            cut = _to_manifold(tube) ^ clip
+            if cut.is_empty():
+                raise WeaveError(f"yarn {yarn.name} lies outside the sample box")
+            out.append((yarn, _from_manifold(cut)))
+        return out
+
+    def scene(self, materials=None) -> Scene:
+        """An ``xr.Scene``: the matrix box (label 1, priority 0), wefts (2, 1) and warps (3, 2).
+
+        ``materials`` maps ``"matrix"``, ``"weft"``, ``"warp"`` to a material (a name or a
+        ``Material``); missing families take their names as materials.
+        """
+        chosen = {name: name for name in LABELS}
+        if materials is not None:
+            if not isinstance(materials, dict):
+                raise WeaveError(f"materials must be a dict of matrix/weft/warp to materials, got {show(materials)}")
+            unknown = set(materials) - set(LABELS)
+            if unknown:
+                raise WeaveError(f"materials: unknown families {sorted(unknown)}; use matrix, weft, warp")
+            chosen.update(materials)
+        scene = Scene()
+        scene.add(self.matrix_mesh(), chosen["matrix"], label=LABELS["matrix"], priority=PRIORITIES["matrix"],
+                  name="matrix")
+        for yarn, mesh in self.meshes():
+            scene.add(mesh, chosen[yarn.family], label=LABELS[yarn.family], priority=PRIORITIES[yarn.family],
+                      name=yarn.name)
+        return scene
