@@ -9,7 +9,8 @@ import pytest
 import xrayraster as xr
 from xrayraster.core.errors import WeaveError
 from xrayraster.weave import Sample, UnitCell
-from xrayraster.weave.sweep import polygon_area
+from xrayraster.weave.sample import PLATEAU
+from xrayraster.weave.sweep import CubicSpline3, polygon_area, sample_path, yarn_mesh
 
 COARSE = dict(points_per_section=12, samples_per_mm=2.0)
 
@@ -61,10 +62,13 @@ def test_binder_path_is_continuous_and_follows_its_gaps():
     # by hand: weft height 0.6*3.2/5 = 0.384, warp height 0.4*3.2/4 = 0.32, pitch 0.704
     gap_z = {0: 0.4 - 0.16, 2: 0.4 + 2 * 0.704 - 0.16}
     path = (2, 2, 0, 0)                              # the default path of binder 0
-    inside = y0.nodes[1:-1]
-    assert len(inside) == 8                          # a node at each of the 8 weft columns
-    np.testing.assert_allclose(inside[:, 1], (np.arange(8) + 0.5) * 2.5)
-    np.testing.assert_allclose(inside[:, 2], [gap_z[path[j % 4]] for j in range(8)], atol=1e-12)
+    per = len(PLATEAU)
+    inside = y0.nodes[per:-per].reshape(8, per, 3)   # a plateau of nodes at each of the 8 weft columns
+    np.testing.assert_allclose(inside[:, :, 1].mean(axis=1), (np.arange(8) + 0.5) * 2.5)
+    np.testing.assert_allclose(inside[:, :, 1] - inside[:, :, 1].mean(axis=1)[:, None],
+                               np.tile(np.array(PLATEAU) * 0.9 * 2.5 / 2, (8, 1)), atol=1e-12)
+    for k in range(per):
+        np.testing.assert_allclose(inside[:, k, 2], [gap_z[path[j % 4]] for j in range(8)], atol=1e-12)
     np.testing.assert_allclose(y0.nodes[:, 0], 1.25)
     assert y0.nodes[0, 1] < 0 and y0.nodes[-1, 1] > 20.0  # runs past the box before the clip
 
@@ -124,3 +128,35 @@ def test_scene_labels_priorities_and_materials():
     assert scene.materials == ("matrix", carbon, "warp")
     with pytest.raises(WeaveError, match="unknown families"):
         s.scene({"resin": "x"})
+
+
+@pytest.mark.parametrize("cells", [(1, 1), (2, 1), (1, 2)])
+def test_binder_centre_line_does_not_overshoot_its_gaps(cells):
+    s = Sample(UnitCell(), cells=cells, **COARSE)
+    binders = [y for y in s.yarns() if y.kind == "binder"]
+    height = s.cell.warp_height
+    worst = 0.0
+    for yarn in binders:
+        spline = CubicSpline3(yarn.nodes, yarn.end_tangents)
+        points, _, _ = sample_path(spline, 50.0)     # the sampled path, dense (0.02 mm)
+        lo, hi = yarn.nodes[:, 2].min(), yarn.nodes[:, 2].max()
+        worst = max(worst, points[:, 2].max() - hi, lo - points[:, 2].min())
+    assert worst < 0.01 * height                     # measured 4e-4 mm = 0.13 % (was 0.23 mm)
+
+
+def test_no_binder_is_cut_by_the_top_or_bottom_face(sample_2x1):
+    s1 = Sample(UnitCell(), cells=(1, 1), **COARSE)
+    for s, meshes in [(s1, s1.meshes()), sample_2x1]:
+        lo, hi = s.yarn_box
+        # an independent clip: x/y faces of the yarn box only, 10 mm of room above and below
+        tall = manifold3d.Manifold.cube((hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2] + 20.0)).translate(
+            (lo[0], lo[1], lo[2] - 10.0))
+        binders = [(y, m) for y, m in meshes if y.kind == "binder"]
+        assert len(binders) == 16 * s.cells[0]
+        for yarn, mesh in binders:
+            assert mesh.bounds[0, 2] > lo[2] + 0.05 and mesh.bounds[1, 2] < hi[2] - 0.05
+            tube = yarn_mesh(yarn.nodes, yarn.outline, s.samples_per_mm, end_tangents=yarn.end_tangents)
+            solid = manifold3d.Manifold(manifold3d.Mesh64(
+                vert_properties=np.array(tube.vertices, dtype=np.float64, order="C"),
+                tri_verts=np.array(tube.faces, dtype=np.uint64, order="C"))) ^ tall
+            assert abs(mesh.volume - solid.volume()) <= 1e-9 * mesh.volume
