@@ -32,7 +32,7 @@ import numpy as np
 import trimesh
 
 import xrayraster as xr
-from references.chords import rot_z
+from references.chords import cylinder_chord, rot_z
 
 # -- geometry: cone beam, magnification 2.5; the scene (≤ 8.9 mm from the axis) fills ~80–90 % of
 #    a 48 mm detector at every angle. Pixel size = DET_WIDTH / n, so all detector sizes see the
@@ -87,25 +87,8 @@ class Tube:
     def smooth_chord(self, src: np.ndarray, dirs: np.ndarray) -> np.ndarray:
         """Chord of the ideal capped cylinder along unit rays from ``src``, float64."""
         a = self.axis
-        p, q = (a + 1) % 3, (a + 2) % 3
-        o = src - np.asarray(self.centre)
-        dx, dy, dz = dirs[:, p], dirs[:, q], dirs[:, a]
-        qa = dx * dx + dy * dy
-        qb = o[p] * dx + o[q] * dy
-        qc = o[p] ** 2 + o[q] ** 2 - self.radius**2
-        with np.errstate(divide="ignore", invalid="ignore"):
-            disc = qb * qb - qa * qc
-            root = np.sqrt(np.maximum(disc, 0.0))
-            lo = np.where(qa > 0, (-qb - root) / qa, np.where(qc <= 0, -np.inf, np.inf))
-            hi = np.where(qa > 0, (-qb + root) / qa, np.where(qc <= 0, np.inf, -np.inf))
-            lo = np.where((qa > 0) & (disc <= 0), np.inf, lo)
-            t1 = (-LENGTH / 2 - o[a]) / dz
-            t2 = (LENGTH / 2 - o[a]) / dz
-        inside = abs(o[a]) <= LENGTH / 2
-        zlo = np.where(dz == 0, -np.inf if inside else np.inf, np.minimum(t1, t2))
-        zhi = np.where(dz == 0, np.inf if inside else -np.inf, np.maximum(t1, t2))
-        enter = np.maximum(np.maximum(lo, zlo), 0.0)
-        return np.maximum(np.minimum(hi, zhi) - enter, 0.0)
+        axes = [(a + 1) % 3, (a + 2) % 3, a]  # the tube's frame: its axis last, as cylinder_chord's z
+        return cylinder_chord((src - np.asarray(self.centre))[axes], dirs[:, axes], self.radius, LENGTH / 2)
 
 
 def yarn_layout() -> list[Tube]:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import sys
 import time
@@ -13,7 +14,7 @@ from ..core.choices import FILTERS, RECONSTRUCTION_INPUTS, SCAN_KINDS
 from ..core.errors import ConfigError
 from ..core.geometry import geometry_from_dict
 from ..io.scan_file import read_scan_file
-from ..io.tiff import read_tiff, write_quicklook, write_volume
+from ..io.tiff import read_tiff
 from ..recon.fdk import fdk
 from .options import add_scan_file
 from .outputs import check_outputs, quicklook_path
@@ -138,19 +139,10 @@ def run(args) -> int:
               device=args.device)
     seconds = time.perf_counter() - start
     vz, vy, vx = volume.voxel_size
-    out = write_volume(args.out, vol.data, volume, {
-        "quantity": "linear attenuation coefficient (FDK)" if geometry.beam == "cone" else "linear attenuation coefficient (FBP)",
-        "units": vol.unit,
-        "geometry": geometry.to_dict(),
-        "geometry_source": source,
-        "filter": args.filter,
-        "cutoff": args.cutoff,
-        "scan": args.scan,
-        "input": kind,
-        "projections_file": str(args.projections),
-    })
-    png = write_quicklook(quicklook_path(args.out), np.clip(vol.data[vol.data.shape[0] // 2], 0, None),
-                          volume.voxel_size[1:])
+    vol = dataclasses.replace(vol, provenance={**vol.provenance, "geometry_source": source,
+                                               "projections_file": str(args.projections)})
+    out = vol.save(args.out)
+    png = quicklook_path(out)
     print(f"{out}: {'×'.join(map(str, vol.data.shape))} voxels (z, y, x) of {vz:g}×{vy:g}×{vx:g} mm, "
           f"{vol.unit}, range {vol.data.min() + 0.0:.4g} to {vol.data.max() + 0.0:.4g}, {stack.shape[0]} views, "
           f"geometry from {source}, {seconds:.2f} s; central slice {png}")

@@ -10,7 +10,6 @@ from ..core.choices import OVERLAP_MODES, RADIOGRAPH_OUTPUTS
 from ..core.errors import ConfigError
 from ..core.projections import Projections
 from ..io.scene_file import load_scene_file
-from ..io.tiff import pixel_size_mm, write_projections, write_quicklook
 from ..physics.detector import Detector
 from ..simulate.renderer import Renderer
 from .options import nonnegative_int, positive_int
@@ -58,8 +57,8 @@ def _render_path_lengths(args) -> int:
         projections = renderer.path_lengths_all(scene, views)
     seconds = time.perf_counter() - start
     stack, method, driver = projections.data, projections.provenance["method"], projections.provenance["renderer"]
-    out = write_projections(args.out, _with_scene_file(projections, args.scene))
-    png = write_quicklook(quicklook_path(args.out), stack[0].sum(axis=0), pixel_size_mm(geometry), where="at the detector")
+    out = _with_scene_file(projections, args.scene).save(args.out)
+    png = quicklook_path(out)
     print(
         f"{out}: {len(views)} view(s) × {len(scene.materials)} material(s) × {stack.shape[2]}×{stack.shape[3]} "
         f"px, max {stack.max():.4f} mm, {method} pass, {seconds:.2f} s on {driver}; quick-look {png}"
@@ -90,8 +89,8 @@ def _render_radiographs(args) -> int:
     seconds = time.perf_counter() - start
     stack, units, facts = projections.data, projections.unit, projections.provenance
     starved, method, driver = facts["starved_pixels"], facts["method"], facts["renderer"]
-    out = write_projections(args.out, _with_scene_file(projections, args.scene))
-    png = write_quicklook(quicklook_path(args.out), stack[0], pixel_size_mm(geometry), where="at the detector")
+    out = _with_scene_file(projections, args.scene).save(args.out)
+    png = quicklook_path(out)
     extras = []
     if args.noise:
         extras.append(f"noise seed {seed}")

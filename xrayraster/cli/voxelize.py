@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 
@@ -10,7 +11,6 @@ import numpy as np
 from ..gl.voxelize import voxelize
 from ..io.scan_file import read_scan_file
 from ..io.scene_file import load_scene_file
-from ..io.tiff import write_quicklook, write_volume
 from .options import add_scan_file, positive_int
 from .outputs import check_outputs, quicklook_path
 
@@ -44,19 +44,10 @@ def run(args) -> int:
     for o in loaded.scene.objects:
         names.setdefault(o.label, []).append(o.name)
     vz, vy, vx = volume.voxel_size
-    out = write_volume(args.out, labels.data, volume, {
-        "quantity": "label (0: background; else the label of the highest-priority object at the voxel centre)",
-        "labels": {str(k): v for k, v in sorted(names.items())},
-        "scene_file": str(args.scene),
-    })
-    if labels.fractions is not None:
-        shares = fractions_path(args.out)
-        # ImageJ hyperstacks are ordered T Z C Y X: one channel per label.
-        write_volume(shares, labels.fractions.transpose(1, 0, 2, 3), volume, channels="label", info={
-            "quantity": f"share of each voxel owned by each label, from {args.fractions}³ sub-voxel centres",
-            "channel_labels": list(labels.labels)})
-    png = write_quicklook(quicklook_path(args.out), labels.data[labels.data.shape[0] // 2].astype(np.float32),
-                          volume.voxel_size[1:])
+    labels = dataclasses.replace(labels, provenance={"labels": {str(k): v for k, v in sorted(names.items())},
+                                                     "scene_file": str(args.scene)})
+    out = labels.save(args.out)
+    png = quicklook_path(out)
     counts = np.bincount(labels.data.ravel())
     present = ", ".join(f"{k}: {counts[k]}" for k in np.flatnonzero(counts) if k)
     print(f"{out}: {'×'.join(map(str, labels.data.shape))} {labels.data.dtype} labels (z, y, x) of {vz:g}×{vy:g}×{vx:g} mm, "

@@ -31,7 +31,7 @@ the output array, not the GPU, bounds the size.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -62,6 +62,7 @@ class LabelVolume:
     geometry: VolumeGeometry
     labels: tuple[int, ...] | None = None
     fractions: np.ndarray | None = None
+    provenance: dict = field(default_factory=dict, compare=False)  # JSON-ready facts stored by save
 
     def save(self, path, *, quicklook: bool = True):
         """Write the labels as ``xrayraster voxelize`` does: a uint8/uint16 ImageJ TIFF (z, y, x) at
@@ -74,7 +75,7 @@ class LabelVolume:
         present = sorted(int(k) for k in np.unique(self.data) if k)
         out = write_volume(path, self.data, self.geometry, {
             "quantity": "label (0: background; else the label of the highest-priority object at the voxel centre)",
-            "labels_present": present})
+            "labels_present": present, **self.provenance})
         if self.fractions is not None:
             # ImageJ hyperstacks are ordered T Z C Y X: one channel per label.
             write_volume(out.with_name(f"{out.stem}_fractions.tif"), self.fractions.transpose(1, 0, 2, 3),
