@@ -15,6 +15,7 @@ import numpy as np
 
 from .errors import ConfigError
 from .geometry import geometry_from_dict
+from .tiff import pixel_size_mm, read_tiff, write_projections, write_quicklook
 
 # quantity → (unit, axes, description). A line integral and a transmission are ratios ("1").
 QUANTITIES = {
@@ -92,8 +93,6 @@ class Projections:
         ``quicklook``, a PNG beside it (``path`` with suffix ``.png``: view 0, summed over
         materials for path lengths, +z up, with a scale bar at the detector). Returns ``path``;
         :meth:`load` reads it back."""
-        from .tiff import pixel_size_mm, write_projections, write_quicklook
-
         out = write_projections(path, self)
         if quicklook:
             first = self.data[0].sum(axis=0) if self.quantity == "path_length" else self.data[0]
@@ -103,7 +102,5 @@ class Projections:
     @classmethod
     def load(cls, path) -> Projections:
         """The stack :meth:`save` (or ``xrayraster render``) wrote; its metadata must carry the geometry."""
-        from .tiff import read_tiff
-
         data, info = read_tiff(path)
         return cls.from_metadata(data, info, str(path))

@@ -39,6 +39,7 @@ from ..core.choices import VOXELIZE_METHODS, check_choice
 from ..core.errors import VoxelizeError
 from ..core.geometry import VectorGeometry
 from ..core.memory import available_memory
+from ..core.tiff import write_quicklook, write_volume
 from ..core.volume import VolumeGeometry
 from ..scene.scene import Scene
 from .context import GLContext
@@ -70,8 +71,6 @@ class LabelVolume:
         (``volume_geometry``) as JSON metadata; with fractions, ``<stem>_fractions.tif`` beside it
         (float32, z, label, y, x: one channel per label of :attr:`labels`); and, with
         ``quicklook``, a PNG of the central slice with a scale bar. Returns ``path``."""
-        from ..core.tiff import write_quicklook, write_volume
-
         present = sorted(int(k) for k in np.unique(self.data) if k)
         out = write_volume(path, self.data, self.geometry, {
             "quantity": "label (0: background; else the label of the highest-priority object at the voxel centre)",

@@ -28,6 +28,7 @@ from ..core.errors import ReconstructionError
 from ..core.geometry import as_vector_geometry
 from ..core.memory import available_memory
 from ..core.projections import Projections
+from ..core.tiff import write_quicklook, write_volume
 from ..core.volume import VolumeGeometry
 from .fdk_weights import FDKViews, fdk_views
 from .opencl import CLContext
@@ -68,8 +69,6 @@ class Volume:
         (``volume_geometry``) and :attr:`provenance` as JSON metadata, and, with ``quicklook``, a
         PNG of the central slice (negative values shown as 0, with a scale bar) beside it.
         Returns ``path``."""
-        from ..core.tiff import write_quicklook, write_volume
-
         info = {"quantity": "linear attenuation coefficient", "units": self.unit, **self.provenance}
         out = write_volume(path, self.data, self.geometry, info)
         if quicklook:

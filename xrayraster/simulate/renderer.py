@@ -76,8 +76,6 @@ class Renderer(PathLengthRenderer):
         spectrum, detector, seed and per-view bins, dropped signal and starved pixels, as the
         command line writes them. ``progress`` as in :meth:`path_lengths_all`.
         """
-        if noise and seed is None:
-            raise RenderError("noise=True needs a seed (an int), so the noise is reproducible")
         views = self._views(views)
         detector = detector or Detector()
         shots = [self.project(scene, spectrum, v, detector=detector, output=output, noise=noise, seed=seed)
