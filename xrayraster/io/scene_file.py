@@ -8,6 +8,7 @@ the file's ``[materials]`` first, then in the named-material library
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import tomllib
 from dataclasses import dataclass
@@ -144,8 +145,6 @@ def _add_object(scene: Scene, spec: dict, base: Path, where: str, materials: dic
 
 def _library(name: str) -> Material:
     """The library material ``name`` stands for, called ``name`` (as the file writes it)."""
-    import dataclasses
-
     return dataclasses.replace(Material.named(name), name=name)
 
 
