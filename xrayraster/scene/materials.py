@@ -109,23 +109,29 @@ def _canonical(composition) -> tuple[tuple[int, float], ...]:
     total = math.fsum(merged.values())
     if total == 0:
         raise MaterialError("composition: mass fractions sum to 0; give positive mass fractions summing to 1")
+    _check_sum(total, "composition", "mass fractions")
+    # A composition that is already canonical (rounded, sum within ~n*5e-13 of 1) passes through
+    # unchanged, so canonicalisation is idempotent and repr() round-trips exactly.
+    if abs(total - 1.0) > 1e-10:
+        merged = {z: w / total for z, w in merged.items()}
+    return tuple((z, _round_sig(merged[z])) for z in sorted(merged) if merged[z] > 0)
+
+
+def _check_sum(total: float, field: str, what: str) -> None:
+    """Fractions (``what``) of ``field`` summing to ``total`` are usable as they are within
+    _SUM_TOL_SILENT of 1, with a warning (the caller normalises) up to _SUM_TOL_WARN; else an error."""
     dev = abs(total - 1.0)
     if dev > _SUM_TOL_WARN:
         raise MaterialError(
-            f"composition: mass fractions sum to {total:.6g}, not 1; give fractions (not percent) "
+            f"{field}: {what} sum to {total:.6g}, not 1; give fractions (not percent) "
             f"summing to 1 (within {_SUM_TOL_WARN:g})"
         )
     if dev > _SUM_TOL_SILENT:
         warnings.warn(
-            f"composition: mass fractions sum to {total:.6g}, not 1; normalised to sum to 1",
+            f"{field}: {what} sum to {total:.6g}, not 1; normalised to sum to 1",
             UserWarning,
             stacklevel=_caller_stacklevel(),
         )
-    # A composition that is already canonical (rounded, sum within ~n*5e-13 of 1) passes through
-    # unchanged, so canonicalisation is idempotent and repr() round-trips exactly.
-    if dev > 1e-10:
-        merged = {z: w / total for z, w in merged.items()}
-    return tuple((z, _round_sig(merged[z])) for z in sorted(merged) if merged[z] > 0)
 
 
 def _caller_stacklevel() -> int:
@@ -183,8 +189,9 @@ class Material:
 
     ``composition`` is ((Z, mass fraction), ...) sorted by Z, fractions summing to 1;
     ``density`` in g/cm³. Equality and hashing use composition and density only, never
-    ``name``. Build with :meth:`element`, :meth:`from_formula` or :meth:`from_mass_fractions`,
-    or directly (the composition is validated and canonicalised the same way).
+    ``name``. Build with :meth:`element`, :meth:`from_formula`, :meth:`from_mass_fractions`,
+    :meth:`mixture` (of other materials) or :meth:`named` (the library), or directly (the
+    composition is validated and canonicalised the same way).
     """
 
     name: str = field(compare=False)
@@ -245,6 +252,62 @@ class Material:
             name = "".join(f"{_symbol(z)}{100 * w[z]:.3g}" for z in dict.fromkeys(zs) if z in w)
         object.__setattr__(material, "name", name)
         return material
+
+    @classmethod
+    def mixture(cls, parts, by: str = "volume", name: str | None = None) -> Material:
+        """An ideal mixture of materials: ``parts`` is a sequence of ``(Material, fraction)`` pairs,
+        the fractions by ``volume`` (default) or by ``mass``, each >= 0, summing to 1 (normalised
+        as in :meth:`from_mass_fractions`: silently within 1e-6, with a warning up to 1e-2).
+
+        Ideal means the parts keep their own densities and fill the volume with no voids:
+
+        - by volume (f_i): density ρ = Σ f_i ρ_i and part i's mass fraction m_i = f_i ρ_i / ρ;
+        - by mass (m_i): 1/ρ = Σ m_i / ρ_i.
+
+        Element j's mass fraction is then Σ m_i w_ij, so the linear attenuation of a volume mixture
+        is Σ f_i μ_i and the mass attenuation of a mass mixture Σ m_i (μ/ρ)_i. The name defaults to
+        e.g. ``"0.6 carbon_fibre + 0.4 epoxy (by volume)"``.
+        """
+        if by not in ("volume", "mass"):
+            raise MaterialError(f"by: expected 'volume' or 'mass' (what the fractions measure), got {by!r}")
+        try:
+            pairs = [(material, fraction) for material, fraction in parts]
+        except (TypeError, ValueError):
+            raise MaterialError(
+                "parts: expected (Material, fraction) pairs, e.g. [(carbon_fibre, 0.6), (epoxy, 0.4)]"
+            ) from None
+        if not pairs:
+            raise MaterialError("parts: no materials given; give at least one (Material, fraction) pair")
+        fractions = []
+        for i, (material, fraction) in enumerate(pairs):
+            if not isinstance(material, Material):
+                raise MaterialError(f"parts[{i}]: expected a Material, got {material!r}")
+            try:
+                f = float(fraction)
+            except (TypeError, ValueError):
+                raise MaterialError(f"parts[{i}]: {by} fraction of {material.name} must be a number, "
+                                    f"got {fraction!r}") from None
+            if not math.isfinite(f) or f < 0:
+                raise MaterialError(f"parts[{i}]: {by} fraction of {material.name} must be finite and >= 0, "
+                                    f"got {fraction!r}")
+            fractions.append(f)
+        total = math.fsum(fractions)
+        _check_sum(total, "parts", f"{by} fractions")
+        materials = [material for material, _ in pairs]
+        fractions = [f / total for f in fractions]
+        if by == "volume":
+            density = math.fsum(f * m.density for m, f in zip(materials, fractions))
+            masses = [f * m.density / density for m, f in zip(materials, fractions)]
+        else:
+            density = 1.0 / math.fsum(f / m.density for m, f in zip(materials, fractions))
+            masses = fractions
+        elements: dict[int, list[float]] = {}
+        for material, mass in zip(materials, masses):
+            for z, w in material.composition:
+                elements.setdefault(z, []).append(mass * w)
+        if name is None:
+            name = " + ".join(f"{f:g} {m.name}" for m, f in zip(materials, fractions)) + f" (by {by})"
+        return cls(name, tuple((z, math.fsum(ws)) for z, ws in elements.items()), density)
 
     @classmethod
     def named(cls, name: str) -> Material:

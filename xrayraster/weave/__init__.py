@@ -1,7 +1,9 @@
 """Woven-composite geometry: unit cells, yarn paths and their meshes (needs no OpenGL)."""
 
+from .materials import FibreBundle, Tracer, YarnMaterials
 from .sample import Sample
 from .spec import Section, UnitCell
 from .textomos import TextomosImport, read_textomos
 
-__all__ = ["Sample", "Section", "TextomosImport", "UnitCell", "read_textomos"]
+__all__ = ["FibreBundle", "Sample", "Section", "TextomosImport", "Tracer", "UnitCell", "YarnMaterials",
+           "read_textomos"]

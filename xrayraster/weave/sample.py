@@ -31,6 +31,7 @@ import trimesh
 from ..core.errors import WeaveError
 from ..core.validate import show
 from ..scene.scene import Scene
+from .materials import as_yarn_materials
 from .spec import Section, UnitCell
 from .sweep import ellipse, lenticular, power_ellipse, rounded_rectangle, yarn_mesh
 
@@ -210,21 +211,24 @@ class Sample:
     def scene(self, materials=None) -> Scene:
         """An ``xr.Scene``: the matrix box (label 1, priority 0), wefts (2, 1) and warps (3, 2).
 
-        ``materials`` maps ``"matrix"``, ``"weft"``, ``"warp"`` to a material (a name or a
-        ``Material``); missing families take their names as materials.
+        ``materials``: a :class:`~xrayraster.weave.materials.YarnMaterials`, None for its defaults
+        (epoxy, and carbon-fibre bundles at fibre volume fraction 0.6), or a dict of its
+        ``matrix``/``weft``/``warp`` fields. A tracer yarn takes its own material and keeps its
+        family's priority, and its family's label unless the tracer gives one.
         """
-        chosen = {name: name for name in LABELS}
-        if materials is not None:
-            if not isinstance(materials, dict):
-                raise WeaveError(f"materials must be a dict of matrix/weft/warp to materials, got {show(materials)}")
-            unknown = set(materials) - set(LABELS)
-            if unknown:
-                raise WeaveError(f"materials: unknown families {sorted(unknown)}; use matrix, weft, warp")
-            chosen.update(materials)
+        chosen = as_yarn_materials(materials)
+        family = chosen.resolve()
+        tracers = chosen.tracer_materials()
+        names = [yarn.name for yarn in self.yarns()]
+        missing = sorted(set(tracers) - set(names))
+        if missing:
+            raise WeaveError(f"tracers: no yarn named {', '.join(map(repr, missing))} in this sample; name one "
+                             f"as Sample.yarns() does, e.g. {names[0]!r} or {names[-1]!r}")
         scene = Scene()
-        scene.add(self.matrix_mesh(), chosen["matrix"], label=LABELS["matrix"], priority=PRIORITIES["matrix"],
+        scene.add(self.matrix_mesh(), family["matrix"], label=LABELS["matrix"], priority=PRIORITIES["matrix"],
                   name="matrix")
         for yarn, mesh in self.meshes():
-            scene.add(mesh, chosen[yarn.family], label=LABELS[yarn.family], priority=PRIORITIES[yarn.family],
-                      name=yarn.name)
+            material, label = tracers.get(yarn.name, (family[yarn.family], None))
+            scene.add(mesh, material, label=LABELS[yarn.family] if label is None else label,
+                      priority=PRIORITIES[yarn.family], name=yarn.name)
         return scene
