@@ -122,10 +122,11 @@ def test_scene_labels_priorities_and_materials():
     for o in scene.objects[1:]:
         label, priority = families[o.name.split("_")[0]]
         assert (o.label, o.priority) == (label, priority)
-    assert scene.materials == ("matrix", "weft", "warp")
+    default = xr.weave.YarnMaterials().resolve()
+    assert scene.materials == (default["matrix"], default["weft"])      # equal weft/warp bundles: one channel
     carbon = xr.Material("carbon", ((6, 1.0),), 1.8)
     scene = s.scene({"weft": carbon})
-    assert scene.materials == ("matrix", carbon, "warp")
+    assert scene.materials == (default["matrix"], carbon, default["warp"])
     with pytest.raises(WeaveError, match="unknown families"):
         s.scene({"resin": "x"})
 
