@@ -1,0 +1,89 @@
+"""The TexGen peer (scripts/peers/texgen_peer.py): its overlap measure, its input checks and, where
+pytexgen is installed, the frame and pattern mapping of TexGen's layer-to-layer textile."""
+
+import math
+
+import numpy as np
+import pytest
+import trimesh
+
+from scripts.peers.texgen_peer import (
+    texgen_available,
+    texgen_layer_to_layer,
+    yarn_overlap,
+)
+from xrayraster.core.errors import WeaveError
+from xrayraster.weave import UnitCell
+
+
+def test_yarn_overlap_sums_shared_volume_and_counts_open_meshes():
+    a = trimesh.creation.box(bounds=[[0, 0, 0], [1, 1, 1]])
+    b = trimesh.creation.box(bounds=[[0.5, 0, 0], [1.5, 1, 1]])  # shares 0.5 x 1 x 1 with a
+    c = trimesh.creation.box(bounds=[[0, 1, 0], [2, 2, 1]])      # only touches a and b
+    d = trimesh.creation.box(bounds=[[0.25, 0.25, 0.25], [0.75, 0.75, 2]])  # 0.5 x 0.5 x 0.75 in a, 0.25 x 0.5 x 0.75 in b
+    hole = trimesh.creation.box(bounds=[[0, 0, 0], [1, 1, 1]])
+    hole = trimesh.Trimesh(hole.vertices, hole.faces[:-2], process=False)  # one side removed: not closed
+    volume, refused = yarn_overlap([a, b, c, d, hole])
+    assert refused == 1
+    assert volume == pytest.approx(0.5 + 0.5 * 0.5 * 0.75 + 0.25 * 0.5 * 0.75, abs=1e-9)
+
+
+@pytest.mark.parametrize("kwargs, field", [
+    ({"cell": UnitCell(stuffers=1)}, "stuffers"),
+    ({"cell": UnitCell(binders=1)}, "binder_position"),  # warp positions 1..3 hold no binder
+    ({"cell": UnitCell(warp_positions=1, binders=2, binder_path=((1, 1, 1, 1), (3, 3, 3, 3)))}, "binder_path"),
+    ({"cells": (0, 1)}, "cells"),
+    ({"resolution": 3}, "resolution"),
+    ({"cell": "default"}, "cell"),
+])
+def test_cells_texgen_cannot_build_are_refused_before_texgen_runs(kwargs, field):
+    args = {"cell": UnitCell(), "cells": (1, 1), "resolution": 12} | kwargs
+    with pytest.raises(WeaveError, match=field):
+        texgen_layer_to_layer(**args)
+
+
+@pytest.mark.skipif(texgen_available() is not None, reason=f"TexGen peer: {texgen_available()}")
+def test_texgen_textile_lands_on_our_cell():
+    # Unequal spacings and counts in x and y and two cells along x only: a swapped axis, a wrong
+    # tile or a wrong binder stack shows in the counts, the box or the binder heights.
+    cell = UnitCell(weft_per_layer=4, warp_positions=3, weft_layers=4, warp_spacing=2.0, weft_spacing=3.0,
+                    thickness=3.6, margin_z=0.4)
+    nx, ny = 2, 1
+    result = texgen_layer_to_layer(cell, (nx, ny), resolution=12)
+    sx, sy, sz = cell.size
+    kinds = list(result.kinds)
+    assert kinds.count("weft") == cell.weft_per_layer * cell.weft_layers * ny
+    assert kinds.count("binder") == cell.binders * nx
+    points = np.vstack([m.vertices for m in result.meshes])
+    assert np.all(points.min(axis=0) >= -1e-9)
+    assert np.all(points.max(axis=0) <= np.array([nx * sx, ny * sy, sz]) + 1e-9)
+
+    wefts = [m for m, k in zip(result.meshes, kinds) if k == "weft"]
+    assert all(m.is_watertight for m in wefts)
+    centres = sorted((round(float(m.centroid[1]), 9), round(float(m.centroid[2]), 9)) for m in wefts)
+    expected = sorted((round(y, 9), round(z, 9)) for y in cell.weft_y for z in cell.weft_layer_z)
+    assert np.allclose(centres, expected, atol=1e-6)
+    # TexGen's power ellipse has our superellipse's area, 4ab·Γ(1 + 1/3)²/Γ(1 + 2/3); its 12-point
+    # outline is inscribed in it, a few per cent smaller (a swapped height would be 20 % off).
+    a, b = cell.weft_width / 2, cell.weft_height / 2
+    smooth = 4 * a * b * math.gamma(1 + 1 / 3) ** 2 / math.gamma(1 + 2 / 3)
+    for m in wefts:
+        assert m.extents[:2] == pytest.approx([nx * sx, cell.weft_width])
+        assert 0.9 * smooth < m.volume / (nx * sx) < smooth
+
+    # Every binder sits at its gap's height over the middle of every weft column it crosses.
+    matched = set()
+    for mesh, kind in zip(result.meshes, kinds):
+        if kind != "binder":
+            continue
+        x = float(mesh.bounds.mean(axis=0)[0])
+        cx, pos = int(x // sx), round((x % sx) / cell.warp_spacing - 0.5)
+        heights = []
+        for j, y in enumerate(cell.weft_y):
+            near = mesh.vertices[np.abs(mesh.vertices[:, 1] - y) < 0.3]
+            heights.append((near[:, 2].max() + near[:, 2].min()) / 2)
+        fits = [b for b in range(cell.binders) if cell.binder_position[b] == pos and
+                max(abs(h - cell.gap_z(g)) for h, g in zip(heights, cell.binder_path[b])) < 0.05 * cell.warp_height]
+        assert len(fits) == 1
+        matched.add((cx, fits[0]))
+    assert len(matched) == cell.binders * nx
