@@ -1,7 +1,8 @@
 """Woven-composite geometry: unit cells, yarn paths and their meshes (needs no OpenGL)."""
 
+from .distort import Distortion
 from .sample import Sample
 from .spec import Section, UnitCell
 from .textomos import TextomosImport, read_textomos
 
-__all__ = ["Sample", "Section", "TextomosImport", "UnitCell", "read_textomos"]
+__all__ = ["Distortion", "Sample", "Section", "TextomosImport", "UnitCell", "read_textomos"]
