@@ -304,6 +304,14 @@ def test_sample_level_limits_name_the_field_and_the_fix(kwargs, match):
         Sample(UnitCell(), **kwargs)
 
 
+def test_a_yarn_folded_by_its_distortion_is_named_with_the_seed_and_the_fix():
+    # waviness of 5 mm at a 10 mm wavelength bends with radii near λ² / (4π² a) = 0.5 mm, below the
+    # weft's 1.125 mm half-width: the mesher's bend limit refuses it
+    d = Distortion(waviness_mm=5.0, waviness_wavelength_mm=10.0)
+    with pytest.raises(WeaveError, match=r"^yarn [\w-]+: the yarn path bends .* \(distortion seed 4: lower"):
+        Sample(UnitCell(), cells=(1, 1), distortion=d, seed=4, **COARSE).meshes()
+
+
 def test_node_displacement_at_its_along_yarn_limit_keeps_the_nodes_in_order():
     # the default cell: along a weft the nodes are 2.5 mm apart (limit 0.625 mm); along a binder the
     # runs between plateaus are 2.5 - 0.5 * 2.25 = 1.375 mm (limit 0.34375 mm)

@@ -408,3 +408,25 @@ def test_the_bend_limit_uses_each_samples_own_section():
         sweep(points, section_outlines(outline, scale, np.zeros(60)), frames)
     with pytest.raises(WeaveError, match=r"\(n, k, 2\) with n = 60"):
         sweep(points, section_outlines(outline, scale[:59], np.zeros(59)), frames)
+
+
+def test_within_trims_the_tube_outside_the_box_to_the_same_clipped_solid():
+    nodes, outline = wavy_nodes(), ellipse(1.2, 0.5, 16)
+    box = np.array([[2.0, -5.0, -5.0], [8.0, 5.0, 5.0]])
+    clip = manifold3d.Manifold.cube((6.0, 10.0, 10.0)).translate((2.0, -5.0, -5.0))
+
+    def clipped(mesh):
+        solid = manifold3d.Manifold(manifold3d.Mesh64(vert_properties=np.array(mesh.vertices, order="C"),
+                                                      tri_verts=np.array(mesh.faces, np.uint64, order="C")))
+        return (solid ^ clip).volume()
+
+    full = yarn_mesh(nodes, outline, 8.0)
+    trimmed = yarn_mesh(nodes, outline, 8.0, within=box)
+    check_closed_mesh(trimmed.vertices, trimmed.faces)
+    assert len(trimmed.faces) < 0.75 * len(full.faces)           # 4 of the 10 mm lie outside
+    assert clipped(trimmed) == pytest.approx(clipped(full), rel=1e-12)
+    rings = trimmed.vertices[:-2].reshape(-1, 16, 3)
+    assert rings[0, :, 0].max() < 2.0 and rings[1, :, 0].max() >= 2.0        # one ring kept beyond each end face
+    assert rings[-1, :, 0].min() > 8.0 and rings[-2, :, 0].min() <= 8.0
+    away = yarn_mesh(nodes, outline, 8.0, within=box + [[0, 20, 0], [0, 20, 0]])   # never meets the box
+    assert len(away.faces) == len(full.faces)

@@ -94,10 +94,11 @@ class Yarn:
     section_scale: np.ndarray | None = None  # (m, 2) width/height factors per node, or None (constant)
     section_rotation_deg: np.ndarray | None = None  # (m,) section rotation per node, or None
 
-    def mesh(self, samples_per_mm: float) -> trimesh.Trimesh:
-        """The closed, unclipped tube of this yarn (:func:`~xrayraster.weave.sweep.yarn_mesh`)."""
+    def mesh(self, samples_per_mm: float, within=None) -> trimesh.Trimesh:
+        """The closed, unclipped tube of this yarn (:func:`~xrayraster.weave.sweep.yarn_mesh`, ``within`` a box)."""
         return yarn_mesh(self.nodes, self.outline, samples_per_mm, end_tangents=self.end_tangents,
-                         section_scale=self.section_scale, section_rotation_deg=self.section_rotation_deg)
+                         section_scale=self.section_scale, section_rotation_deg=self.section_rotation_deg,
+                         within=within)
 
 
 _FLAT = ((0.0, 1.0, 0.0), (0.0, 1.0, 0.0))  # a binder's clamped end tangents: flat, along +y
@@ -318,9 +319,19 @@ class Sample:
 
         lo, hi = self.yarn_box
         clip = manifold3d.Manifold.cube(tuple(hi - lo)).translate(tuple(lo))
+        # a distorted path reaches up to 1.5 node spacings past the box: its tube is trimmed there
+        # first (the same solid once clipped); the regular weave's stays whole, as it always was
+        within = None if self.distortion.is_zero else self.yarn_box
         out = []
         for yarn in self.yarns():
-            cut = _to_manifold(yarn.mesh(self.samples_per_mm)) ^ clip
+            try:
+                tube = yarn.mesh(self.samples_per_mm, within)
+            except WeaveError as exc:
+                hint = "" if self.distortion.is_zero else (
+                    f" (distortion seed {self.seed}: lower the {yarn.family}'s node displacement, section scale or "
+                    "the waviness, or try another seed)")
+                raise WeaveError(f"yarn {yarn.name}: {exc}{hint}") from None
+            cut = _to_manifold(tube) ^ clip
             length = hi[0] - lo[0] if yarn.family == "weft" else hi[1] - lo[1]
             if cut.volume() >= REMNANT_FRACTION * polygon_area(yarn.outline) * length:
                 out.append((yarn, _from_manifold(cut)))

@@ -19,8 +19,9 @@ pieces, each usable on its own:
   starts horizontally starts with its height along +z.
 - **Sweep** (:func:`sweep`): the tube through the sections (one outline, or one per sample: per-node
   scale and rotation carried to every sample by :func:`smooth_profile`, C² and never overshooting,
-  and applied by :func:`section_outlines`), capped at both ends by a fan from the outline's centroid (valid because the outlines above are star-shaped about it; :func:`sweep`
-  checks that every fan triangle is positive, so a non-star outline is refused, not mis-meshed).
+  and applied by :func:`section_outlines`), capped at both ends by a fan from the outline's
+  centroid (valid because the outlines above are star-shaped about it; :func:`sweep` checks that
+  every fan triangle is positive, so a non-star outline is refused, not mis-meshed).
   The result is watertight, 2-manifold, outward-oriented and free of degenerate triangles; every
   triangle's area is checked after building.
 
@@ -54,24 +55,10 @@ from .sections import (
     rounded_rectangle_area,
 )
 
-__all__ = [
-    "CubicSpline3",
-    "ellipse",
-    "ellipse_area",
-    "lenticular",
-    "lenticular_area",
-    "polygon_area",
-    "power_ellipse",
-    "power_ellipse_area",
-    "rotation_minimising_frames",
-    "rounded_rectangle",
-    "rounded_rectangle_area",
-    "sample_path",
-    "section_outlines",
-    "smooth_profile",
-    "sweep",
-    "yarn_mesh",
-]
+__all__ = ["CubicSpline3", "ellipse", "ellipse_area", "lenticular", "lenticular_area", "polygon_area",
+           "power_ellipse", "power_ellipse_area", "rotation_minimising_frames", "rounded_rectangle",
+           "rounded_rectangle_area", "sample_path", "section_outlines", "smooth_profile", "sweep",
+           "yarn_mesh"]
 
 
 # --------------------------------------------------------------------------------------------
@@ -365,8 +352,19 @@ def sweep(path_points, outline, frames, cap: bool = True):
     return vertices, faces
 
 
+def _span_near(points, frames, outlines, box) -> slice:
+    """The samples a tube clipped to ``box`` ((2, 3) mm) needs: each dropped run of end rings lies wholly
+    beyond one face plane, as does the kept ring next to it, so the clipped solid is the same."""
+    rings = points[:, None] + outlines[..., :1] * frames[:, None, 1] + outlines[..., 1:] * frames[:, None, 2]
+    beyond = np.concatenate([rings.max(axis=1) < box[0], rings.min(axis=1) > box[1]], axis=1)  # (n, 6 faces)
+    n = len(points)
+    lead, trail = (int(np.where(b.all(axis=0), n, b.argmin(axis=0)).max()) for b in (beyond, beyond[::-1]))
+    # a path that never meets the box is left whole (its clip is empty either way)
+    return slice(0, n) if lead + trail >= n else slice(max(lead - 1, 0), n - max(trail - 1, 0))
+
+
 def yarn_mesh(nodes, outline, samples_per_mm: float, up=(0.0, 0.0, 1.0), end_tangents=None,
-              section_scale=None, section_rotation_deg=None) -> trimesh.Trimesh:
+              section_scale=None, section_rotation_deg=None, within=None) -> trimesh.Trimesh:
     """A closed yarn: ``outline`` swept along the natural (or clamped) C² spline through ``nodes``.
 
     The path is sampled at ``samples_per_mm`` along arc length, framed by rotation-minimising
@@ -374,8 +372,9 @@ def yarn_mesh(nodes, outline, samples_per_mm: float, up=(0.0, 0.0, 1.0), end_tan
     (width and height factors) and ``section_rotation_deg`` ``(m,)`` (about the tangent), one per
     node, vary the section along the yarn: :func:`smooth_profile` carries them to every sample
     (C², within the node values) and :func:`section_outlines` applies them; give both or neither.
-    Returns an unprocessed ``trimesh.Trimesh`` (the vertices and faces exactly as :func:`sweep`
-    built them).
+    ``within``, a ``(2, 3)`` box (mm) the tube will be clipped to, drops the rings beyond one of its
+    faces but the one nearest the box: the same solid once clipped, with fewer triangles. Returns
+    an unprocessed ``trimesh.Trimesh`` (the vertices and faces exactly as :func:`sweep` built them).
     """
     if (section_scale is None) != (section_rotation_deg is None):
         raise WeaveError("section_scale and section_rotation_deg go together: give both (one per node) or neither")
@@ -393,5 +392,8 @@ def yarn_mesh(nodes, outline, samples_per_mm: float, up=(0.0, 0.0, 1.0), end_tan
     if section_scale is not None:
         outline = section_outlines(outline, smooth_profile(spline.knots, scale, params),
                                    smooth_profile(spline.knots, angle, params))
+    if within is not None:
+        keep = _span_near(points, frames, np.asarray(outline, dtype=np.float64), np.asarray(within, dtype=np.float64))
+        points, frames, outline = points[keep], frames[keep], outline[keep] if np.ndim(outline) == 3 else outline
     vertices, faces = sweep(points, outline, frames, cap=True)
     return trimesh.Trimesh(vertices=vertices, faces=faces, process=False)
