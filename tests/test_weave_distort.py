@@ -44,9 +44,8 @@ def _clip(mesh, box) -> manifold3d.Manifold:
 
 
 def _regular_node(cell, name: str) -> np.ndarray:
-    """The undistorted nodes of a yarn, from its name, by hand (no layer shift): one node per weft
-    node at x = (c + 0.5) · warp_spacing, c = -1 .. nx · warp_columns; a binder's plateaus as in
-    test_weave_sample."""
+    """The undistorted nodes of a yarn of a 1 × 1 sample, from its name, by hand (no layer shift): a
+    weft's at x = (c + 0.5) · warp_spacing for c = -1 .. 4; a binder's plateaus as in test_weave_sample."""
     sx, _, sz = cell.size
     if m := re.fullmatch(r"weft_c(\d+)_l(\d+)_y(-?\d+)", name):
         cz, layer, jy = map(int, m.groups())
