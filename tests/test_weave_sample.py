@@ -12,7 +12,7 @@ from xrayraster.weave import Sample, UnitCell
 from xrayraster.weave.sample import PLATEAU
 from xrayraster.weave.sweep import CubicSpline3, polygon_area, sample_path, yarn_mesh
 
-COARSE = dict(points_per_section=12, samples_per_mm=2.0)
+COARSE = {"points_per_section": 12, "samples_per_mm": 2.0}
 
 
 @pytest.fixture(scope="module")
@@ -29,9 +29,9 @@ def _manifold_ok(mesh) -> bool:
 
 
 @pytest.mark.parametrize("kwargs, field", [
-    (dict(cells=(0, 1)), "nx"), (dict(cells=(1, 0)), "ny"), (dict(cells=(1,)), "cells"),
-    (dict(layers_of_cells=0), "layers_of_cells"), (dict(points_per_section=10), "points_per_section"),
-    (dict(samples_per_mm=0.0), "samples_per_mm"),
+    ({"cells": (0, 1)}, "nx"), ({"cells": (1, 0)}, "ny"), ({"cells": (1,)}, "cells"),
+    ({"layers_of_cells": 0}, "layers_of_cells"), ({"points_per_section": 10}, "points_per_section"),
+    ({"samples_per_mm": 0.0}, "samples_per_mm"),
 ])
 def test_bad_counts_name_the_field(kwargs, field):
     with pytest.raises(WeaveError, match=field):
@@ -94,7 +94,7 @@ def test_yarns_lie_inside_the_box(sample_2x1):
 
 
 def test_straight_weft_volume_is_the_prism(sample_2x1):
-    s, meshes = sample_2x1
+    _, meshes = sample_2x1
     wefts = [(y, m) for y, m in meshes if y.kind == "weft"]
     for yarn, mesh in wefts:
         expected = polygon_area(yarn.outline) * 20.0          # clipped length = nx * 10 mm

@@ -25,6 +25,8 @@ from xrayraster.weave.sweep import (
     rounded_rectangle,
     rounded_rectangle_area,
     sample_path,
+    section_outlines,
+    smooth_profile,
     sweep,
     yarn_mesh,
 )
@@ -325,3 +327,106 @@ def test_sweep_refuses_bad_inputs():
     with pytest.raises(WeaveError, match="degenerate"):
         sweep(np.array([[0.0, 0, 0], [0.0, 0, 0], [1.0, 0, 0]]), ellipse(1.0, 0.5, 12),
               np.repeat(frames[:1], 3, axis=0))
+
+
+# ---------------------------------------------------------------------------- varying sections
+
+
+def test_smooth_profile_is_the_smootherstep_between_knots_and_never_overshoots():
+    knots = np.array([0.0, 0.7, 1.0, 2.6, 3.0])
+    values = np.array([[1.0, 0.2], [0.9, -0.4], [1.1, 0.1], [0.95, 0.0], [1.05, 0.3]])
+    t = np.linspace(0.0, 3.0, 3001)
+    got = smooth_profile(knots, values, t)
+    assert np.allclose(smooth_profile(knots, values, knots), values, atol=1e-15)
+    i = np.clip(np.searchsorted(knots, t, side="right") - 1, 0, 3)
+    tau = (t - knots[i]) / (knots[i + 1] - knots[i])
+    step = 6 * tau**5 - 15 * tau**4 + 10 * tau**3                # Perlin's smootherstep, expanded
+    assert np.allclose(got, values[i] + (values[i + 1] - values[i]) * step[:, None], atol=1e-14)
+    lo, hi = np.minimum(values[i], values[i + 1]), np.maximum(values[i], values[i + 1])
+    assert np.all(got >= lo - 1e-15) and np.all(got <= hi + 1e-15)
+    # C²: first and second derivatives vanish on both sides of every knot, so they match there. The
+    # one-sided differences are O(h²) and O(h) (under 2e-6 and 0.12 here); a C¹ step such as
+    # 3τ² − 2τ³ would leave a second derivative of 6 Δv / L² (over 30 here)
+    h = 1e-4
+    for knot in knots[1:-1]:
+        for side in (smooth_profile(knots, values, knot - np.array([0.0, h, 2 * h])),
+                     smooth_profile(knots, values, knot + np.array([0.0, h, 2 * h]))):
+            assert np.all(np.abs(side[1] - side[0]) / h < 1e-5)
+            assert np.all(np.abs(side[2] - 2 * side[1] + side[0]) / h**2 < 1.0)
+
+
+def test_a_section_growing_along_a_straight_yarn_is_a_frustum():
+    """Outlines scaled by 1 + x/L along x are similar about the apex x = -L: the tube is a pyramid
+    frustum, V = L/3 (A0 + A1 + sqrt(A0 A1)) = 7/3 L A0 for A1 = 4 A0, exactly."""
+    length, n = 4.0, 9
+    x = np.linspace(0.0, length, n)
+    points = np.column_stack([x, np.zeros(n), np.zeros(n)])
+    frames = rotation_minimising_frames(points, np.tile([1.0, 0.0, 0.0], (n, 1)))
+    outline = ellipse(2.0, 1.0, 24)
+    scale = np.repeat((1 + x / length)[:, None], 2, axis=1)
+    vertices, faces = sweep(points, section_outlines(outline, scale, np.zeros(n)), frames)
+    mesh = check_closed_mesh(vertices, faces)
+    assert mesh.volume == pytest.approx(7 / 3 * length * polygon_area(outline), rel=1e-12)
+
+
+def test_section_outlines_scale_then_turn_about_the_origin():
+    outline = np.array([[1.0, 0.0], [0.0, 0.5], [-1.0, 0.0], [0.0, -0.5]])
+    got = section_outlines(outline, [[2.0, 3.0]], [90.0])
+    assert np.allclose(got[0], [[0.0, 2.0], [-1.5, 0.0], [0.0, -2.0], [1.5, 0.0]], atol=1e-15)
+
+
+def test_a_constant_profile_is_the_plain_sweep_bit_for_bit_and_a_varying_one_is_closed():
+    nodes = wavy_nodes()
+    outline = power_ellipse(1.2, 0.5, 3.0, 16)
+    plain = yarn_mesh(nodes, outline, 4.0)
+    same = yarn_mesh(nodes, outline, 4.0, section_scale=np.ones((9, 2)), section_rotation_deg=np.zeros(9))
+    assert plain.vertices.tobytes() == same.vertices.tobytes() and np.array_equal(plain.faces, same.faces)
+    rng = np.random.default_rng(0)
+    varied = yarn_mesh(nodes, outline, 4.0, section_scale=1 + 0.2 * rng.uniform(-1, 1, (9, 2)),
+                       section_rotation_deg=rng.uniform(-20, 20, 9))
+    check_closed_mesh(varied.vertices, varied.faces)
+    with pytest.raises(WeaveError, match="give both"):
+        yarn_mesh(nodes, outline, 4.0, section_scale=np.ones((9, 2)))
+    with pytest.raises(WeaveError, match=r"\(9, 2\)"):
+        yarn_mesh(nodes, outline, 4.0, section_scale=np.ones((8, 2)), section_rotation_deg=np.zeros(8))
+    with pytest.raises(WeaveError, match="positive"):
+        yarn_mesh(nodes, outline, 4.0, section_scale=np.zeros((9, 2)), section_rotation_deg=np.zeros(9))
+
+
+def test_the_bend_limit_uses_each_samples_own_section():
+    half_width = 1.0
+    t = np.linspace(0.0, np.pi / 2, 60)
+    radius = 0.9 * half_width                                 # too tight for the full section, fine at 0.8
+    points = np.column_stack([radius * np.cos(t), radius * np.sin(t), np.zeros_like(t)])
+    frames = rotation_minimising_frames(points, np.column_stack([-np.sin(t), np.cos(t), np.zeros_like(t)]))
+    outline = ellipse(2 * half_width, 0.5, 32)
+    scale = np.full((60, 2), 0.8)
+    vertices, faces = sweep(points, section_outlines(outline, scale, np.zeros(60)), frames)
+    check_closed_mesh(vertices, faces)
+    scale[30] = 1.0                                           # one full-size section in the bend
+    with pytest.raises(WeaveError, match="bend radius must exceed"):
+        sweep(points, section_outlines(outline, scale, np.zeros(60)), frames)
+    with pytest.raises(WeaveError, match=r"\(n, k, 2\) with n = 60"):
+        sweep(points, section_outlines(outline, scale[:59], np.zeros(59)), frames)
+
+
+def test_within_trims_the_tube_outside_the_box_to_the_same_clipped_solid():
+    nodes, outline = wavy_nodes(), ellipse(1.2, 0.5, 16)
+    box = np.array([[2.0, -5.0, -5.0], [8.0, 5.0, 5.0]])
+    clip = manifold3d.Manifold.cube((6.0, 10.0, 10.0)).translate((2.0, -5.0, -5.0))
+
+    def clipped(mesh):
+        solid = manifold3d.Manifold(manifold3d.Mesh64(vert_properties=np.array(mesh.vertices, order="C"),
+                                                      tri_verts=np.array(mesh.faces, np.uint64, order="C")))
+        return (solid ^ clip).volume()
+
+    full = yarn_mesh(nodes, outline, 8.0)
+    trimmed = yarn_mesh(nodes, outline, 8.0, within=box)
+    check_closed_mesh(trimmed.vertices, trimmed.faces)
+    assert len(trimmed.faces) < 0.75 * len(full.faces)           # 4 of the 10 mm lie outside
+    assert clipped(trimmed) == pytest.approx(clipped(full), rel=1e-12)
+    rings = trimmed.vertices[:-2].reshape(-1, 16, 3)
+    assert rings[0, :, 0].max() < 2.0 and rings[1, :, 0].max() >= 2.0        # one ring kept beyond each end face
+    assert rings[-1, :, 0].min() > 8.0 and rings[-2, :, 0].min() <= 8.0
+    away = yarn_mesh(nodes, outline, 8.0, within=box + [[0, 20, 0], [0, 20, 0]])   # never meets the box
+    assert len(away.faces) == len(full.faces)

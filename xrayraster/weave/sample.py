@@ -1,4 +1,4 @@
-"""Regular samples: ``nx × ny × nz`` unit cells as one box of matrix and continuous yarn meshes.
+"""Samples: ``nx × ny × nz`` unit cells as one box of matrix and continuous yarn meshes.
 
 Axes (mm), as in :mod:`xrayraster.weave.spec`: weft yarns run along **x** and are spaced along
 **y**; warp yarns (binders and stuffers) run along **y** and are spaced along **x**; **z** is the
@@ -17,13 +17,20 @@ Paths start and end one node (a weft spacing, or ``extend`` mm for straight yarn
 so the tube's end caps lie outside and the clip to the box (manifold3d, in double precision) leaves
 flat, closed cut faces exactly on the box's faces.
 
-No distortions yet: this is the regular weave. Yarns may touch or cut into each other (as
-TexGen's do); the scene's priorities (warp over weft over matrix) resolve the shared space.
+With a :class:`~xrayraster.weave.distort.Distortion` (all 0 by default: the regular weave above,
+bit for bit), a weft gets a node at every warp column, a stuffer one at every weft column; each
+yarn draws its node displacements, waviness and section scale and rotation from its own generator
+(``seed`` and its name), a binder's plateau moving as one; and each stacked layer of cells moves by
+its own in-plane shift. Yarns of one more period on each side are added where the distortion can
+carry them into the box, and clipped yarns under :data:`REMNANT_FRACTION` of a full one are
+dropped. Yarns may touch or cut into each other (as TexGen's do); the scene's priorities (warp over
+weft over matrix) resolve the shared space.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 
 import numpy as np
 import trimesh
@@ -31,11 +38,19 @@ import trimesh
 from ..core.errors import WeaveError
 from ..core.validate import show
 from ..scene.scene import Scene
+from .distort import Distortion, layer_shift, yarn_draws, yarn_rng
 from .materials import as_yarn_materials
 from .spec import Section, UnitCell
-from .sweep import ellipse, lenticular, power_ellipse, rounded_rectangle, yarn_mesh
+from .sweep import (
+    ellipse,
+    lenticular,
+    polygon_area,
+    power_ellipse,
+    rounded_rectangle,
+    yarn_mesh,
+)
 
-__all__ = ["LABELS", "PLATEAU", "PRIORITIES", "Sample", "Yarn", "section_outline"]
+__all__ = ["LABELS", "PLATEAU", "PRIORITIES", "REMNANT_FRACTION", "Sample", "Yarn", "section_outline"]
 
 LABELS = {"matrix": 1, "weft": 2, "warp": 3}
 PRIORITIES = {"matrix": 0, "weft": 1, "warp": 2}
@@ -47,6 +62,11 @@ PRIORITIES = {"matrix": 0, "weft": 1, "warp": 2}
 #: last interval at each plateau edge keeps the spline from bulging there) brings it to 4e-4 mm
 #: (0.13 % of the binder height) with a smallest bend radius of 0.43 mm (default cell).
 PLATEAU = (-0.5, -0.45, 0.45, 0.5)
+
+#: A clipped yarn smaller than this fraction of a full one (its outline's area times the box's
+#: length along it) is dropped: with a layer shift, yarns of the neighbouring periods straddle the
+#: box's side faces, and the ones barely inside would leave thin slivers along a face.
+REMNANT_FRACTION = 0.1
 
 
 def section_outline(section: Section, width: float, height: float, k: int) -> np.ndarray:
@@ -72,6 +92,23 @@ class Yarn:
     nodes: np.ndarray
     outline: np.ndarray
     end_tangents: tuple | None = None  # clamped unit end tangents of the path, or None (natural)
+    section_scale: np.ndarray | None = None  # (m, 2) width/height factors per node, or None (constant)
+    section_rotation_deg: np.ndarray | None = None  # (m,) section rotation per node, or None
+
+    def mesh(self, samples_per_mm: float, within=None) -> trimesh.Trimesh:
+        """The closed, unclipped tube of this yarn (:func:`~xrayraster.weave.sweep.yarn_mesh`, ``within`` a box)."""
+        return yarn_mesh(self.nodes, self.outline, samples_per_mm, end_tangents=self.end_tangents,
+                         section_scale=self.section_scale, section_rotation_deg=self.section_rotation_deg,
+                         within=within)
+
+
+_FLAT = ((0.0, 1.0, 0.0), (0.0, 1.0, 0.0))  # a binder's clamped end tangents: flat, along +y
+
+
+def _node_columns(count: int, spacing: float, shift: float) -> np.ndarray:
+    """Node indices i (node at ``(i + 0.5) · spacing + shift``) from at least half a ``spacing``
+    before 0 to half a spacing past ``count · spacing``: the path's ends lie outside the box."""
+    return np.arange(math.floor(-1 - shift / spacing), math.ceil(count - shift / spacing) + 1)
 
 
 def _count(name: str, value) -> int:
@@ -99,11 +136,14 @@ def _from_manifold(solid) -> trimesh.Trimesh:
 
 @dataclass(frozen=True)
 class Sample:
-    """``cells = (nx, ny)`` unit cells side by side and ``layers_of_cells`` stacked: the regular weave.
+    """``cells = (nx, ny)`` unit cells side by side and ``layers_of_cells`` stacked.
 
     ``points_per_section`` is the outline's point count (a multiple of 4, so every shape takes it);
-    ``samples_per_mm`` the path samples per mm of yarn. ``extend`` (mm) is how far straight yarns
-    reach past the box before the clip.
+    ``samples_per_mm`` the path samples per mm of yarn. ``extend`` (mm) is how far the regular
+    weave's straight yarns reach past the box before the clip (a distorted sample's paths reach at
+    least half a node spacing past it). ``distortion`` (:class:`Distortion`, all 0 by default: the
+    regular weave, bit for bit) is drawn from ``seed`` (an integer >= 0): the same seed gives the
+    same sample.
     """
 
     cell: UnitCell
@@ -112,6 +152,8 @@ class Sample:
     points_per_section: int = 24
     samples_per_mm: float = 4.0
     extend: float = 0.5
+    distortion: Distortion = field(default_factory=Distortion)
+    seed: int = 0
 
     def __post_init__(self):
         if not isinstance(self.cell, UnitCell):
@@ -130,6 +172,12 @@ class Sample:
         ext = self.extend
         if isinstance(ext, bool) or not isinstance(ext, (int, float)) or not (0 < ext < float("inf")):
             raise WeaveError(f"extend must be a positive number of mm, got {show(ext)}")
+        if not isinstance(self.distortion, Distortion):
+            raise WeaveError(f"distortion must be a Distortion, got {show(self.distortion)}")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
+            raise WeaveError(f"seed must be an integer >= 0, got {show(self.seed)}")
+        object.__setattr__(self, "seed", int(self.seed))
+        self.distortion.check(self.cell, plateau_mm=(PLATEAU[-1] - PLATEAU[0]) * self.cell.weft_width / 2)
 
     # Geometry ---------------------------------------------------------------------------
 
@@ -147,15 +195,37 @@ class Sample:
         return self.yarn_box + np.array([[-m, -m, 0.0], [m, m, 0.0]])
 
     def yarns(self) -> list[Yarn]:
-        """Every yarn's centre-line nodes and outline, wefts first (bottom to top), then warps."""
+        """Every yarn's centre-line nodes and outline, wefts first (bottom to top), then warps.
+
+        With a distortion, the paths carry more nodes (a weft one at every warp column) moved by
+        the draws of each yarn's own generator, and the yarns of one more period on each side join
+        wherever the distortion can carry them into the box (:meth:`meshes` drops their slivers).
+        """
+        if self.distortion.is_zero:
+            return self._regular_yarns()
+        return self._distorted_yarns()
+
+    def _outlines(self) -> tuple[np.ndarray, np.ndarray]:
+        c, k = self.cell, self.points_per_section
+        return (section_outline(c.weft_section, c.weft_width, c.weft_height, k),
+                section_outline(c.warp_section, c.warp_width, c.warp_height, k))
+
+    def _binder_nodes(self, x: float, path, columns: np.ndarray, z0: float) -> np.ndarray:
+        """A binder's plateau nodes (see PLATEAU) at ``x`` over weft ``columns`` (counted over all cells)."""
+        c = self.cell
+        offsets = np.asarray(PLATEAU) * (c.weft_width / 2)
+        ys = ((columns + 0.5) * c.weft_spacing)[:, None] + offsets[None, :]
+        ys = ys.ravel()
+        zs = np.repeat([c.gap_z(path[j % c.weft_per_layer]) for j in columns], len(offsets)) + z0
+        return np.column_stack([np.full(len(ys), x), ys, zs])
+
+    def _regular_yarns(self) -> list[Yarn]:
         c = self.cell
         sx, sy, sz = c.size
         nx, ny = self.cells
         nz = self.layers_of_cells
-        k = self.points_per_section
         x_end = nx * sx
-        weft = section_outline(c.weft_section, c.weft_width, c.weft_height, k)
-        warp = section_outline(c.warp_section, c.warp_width, c.warp_height, k)
+        weft, warp = self._outlines()
         out: list[Yarn] = []
         for cz in range(nz):
             for layer, z in enumerate(c.weft_layer_z):
@@ -165,26 +235,73 @@ class Sample:
                                           [x_end + self.extend, cy * sy + y, cz * sz + z]])
                         out.append(Yarn(f"weft_c{cz}_l{layer}_y{cy * c.weft_per_layer + j}", "weft", "weft",
                                         nodes, weft))
-        w = c.weft_per_layer
-        # binder nodes: a plateau of len(PLATEAU) nodes at the gap's height over the middle of each
-        # weft column over all cells, plus one periodic column past each end (see PLATEAU)
-        columns = np.arange(-1, ny * w + 1)
-        offsets = np.asarray(PLATEAU) * (c.weft_width / 2)
-        ys = ((columns + 0.5) * c.weft_spacing)[:, None] + offsets[None, :]
-        ys = ys.ravel()
-        flat = ((0.0, 1.0, 0.0), (0.0, 1.0, 0.0))
+        # one periodic weft column past each end of the sample
+        columns = np.arange(-1, ny * c.weft_per_layer + 1)
         for cz in range(nz):
             for cx in range(nx):
                 for b, (x, path) in enumerate(zip(c.binder_x, c.binder_path)):
-                    zs = np.repeat([c.gap_z(path[j % w]) for j in columns], len(offsets)) + cz * sz
-                    nodes = np.column_stack([np.full(len(ys), cx * sx + x), ys, zs])
-                    out.append(Yarn(f"binder_c{cz}_x{cx}_b{b}", "warp", "binder", nodes, warp, flat))
+                    nodes = self._binder_nodes(cx * sx + x, path, columns, cz * sz)
+                    out.append(Yarn(f"binder_c{cz}_x{cx}_b{b}", "warp", "binder", nodes, warp, _FLAT))
                 for s, x in enumerate(c.stuffer_x):
                     for g in c.stuffer_gaps:
                         z = c.gap_z(g) + cz * sz
                         nodes = np.array([[cx * sx + x, -self.extend, z], [cx * sx + x, ny * sy + self.extend, z]])
                         out.append(Yarn(f"stuffer_c{cz}_x{cx}_s{s}_g{g}", "warp", "stuffer", nodes, warp))
         return out
+
+    def _distorted_yarns(self) -> list[Yarn]:
+        c, d = self.cell, self.distortion
+        sx, _, sz = c.size
+        nx, ny = self.cells
+        w = c.weft_per_layer
+        nz = self.layers_of_cells
+        weft, warp = self._outlines()
+        shifts = [layer_shift(d, self.seed, cz) for cz in range(nz)]
+        out: list[Yarn] = []
+        for cz, (dx, dy) in enumerate(shifts):
+            # a weft node at every warp column crossing, reaching at least half a spacing past both x faces
+            xs = (_node_columns(nx * c.warp_columns, c.warp_spacing, dx) + 0.5) * c.warp_spacing + dx
+            for layer, z in enumerate(c.weft_layer_z):
+                for jy in range(-w, (ny + 1) * w):  # one extra period on each side
+                    y = (jy + 0.5) * c.weft_spacing + dy
+                    if self._reaches(y, 1, weft, "weft"):
+                        nodes = np.column_stack([xs, np.full(len(xs), y), np.full(len(xs), cz * sz + z)])
+                        out.append(self._distorted(f"weft_c{cz}_l{layer}_y{jy}", "weft", nodes, weft))
+        for cz, (dx, dy) in enumerate(shifts):
+            columns = _node_columns(ny * w, c.weft_spacing, dy)
+            for cx in range(-1, nx + 1):
+                for b, (x, path) in enumerate(zip(c.binder_x, c.binder_path)):
+                    if self._reaches(cx * sx + x + dx, 0, warp, "warp"):
+                        nodes = self._binder_nodes(cx * sx + x, path, columns, cz * sz) + [dx, dy, 0.0]
+                        out.append(self._distorted(f"binder_c{cz}_x{cx}_b{b}", "binder", nodes, warp, _FLAT))
+                for s, x in enumerate(c.stuffer_x):
+                    if self._reaches(cx * sx + x + dx, 0, warp, "warp"):
+                        for g in c.stuffer_gaps:
+                            nodes = np.column_stack([np.full(len(columns), cx * sx + x + dx),
+                                                     (columns + 0.5) * c.weft_spacing + dy,
+                                                     np.full(len(columns), cz * sz + c.gap_z(g))])
+                            out.append(self._distorted(f"stuffer_c{cz}_x{cx}_s{s}_g{g}", "stuffer", nodes, warp))
+        return out
+
+    def _reaches(self, centre: float, axis: int, outline: np.ndarray, family: str) -> bool:
+        """Whether a yarn whose regular centre line lies at ``centre`` (mm, along ``axis``) can reach the box."""
+        d = self.distortion
+        reach = (float(np.max(np.linalg.norm(outline, axis=1))) * (1 + max(getattr(d, f"{family}_scale")))
+                 + getattr(d, f"{family}_node_mm")[axis] + d.waviness_mm)
+        lo, hi = self.yarn_box[:, axis]
+        return centre + reach > lo and centre - reach < hi
+
+    def _distorted(self, name: str, kind: str, nodes: np.ndarray, outline: np.ndarray, end_tangents=None) -> Yarn:
+        """The yarn ``name`` with its nodes moved by its draws; a binder's plateaus move as one."""
+        family = "weft" if kind == "weft" else "warp"
+        group = len(PLATEAU) if kind == "binder" else 1
+        groups = nodes.reshape(-1, group, 3)
+        axial = groups[:, :, 0 if family == "weft" else 1].mean(axis=1)
+        move, scale, rotation = yarn_draws(self.distortion, family, yarn_rng(self.seed, name), axial)
+        varies = self.distortion.varies_section(family)
+        return Yarn(name, family, kind, (groups + move[:, None, :]).reshape(-1, 3), outline, end_tangents,
+                    np.repeat(scale, group, axis=0) if varies else None,
+                    np.repeat(rotation, group) if varies else None)
 
     # Meshes -----------------------------------------------------------------------------
 
@@ -194,18 +311,31 @@ class Sample:
         return trimesh.creation.box(bounds=np.array([lo, hi]))
 
     def meshes(self) -> list[tuple[Yarn, trimesh.Trimesh]]:
-        """Each yarn swept (``yarn_mesh``) and clipped exactly to the yarn box (manifold3d, float64)."""
+        """Each yarn swept (``yarn_mesh``) and clipped exactly to the yarn box (manifold3d, float64).
+
+        A clipped yarn under :data:`REMNANT_FRACTION` of a full one (its outline's area times the
+        box's length along it) is left out: a sliver of a neighbouring period's yarn along a side face.
+        """
         import manifold3d
 
         lo, hi = self.yarn_box
         clip = manifold3d.Manifold.cube(tuple(hi - lo)).translate(tuple(lo))
+        # a distorted path reaches up to 1.5 node spacings past the box: its tube is trimmed there
+        # first (the same solid once clipped); the regular weave's stays whole, as it always was
+        within = None if self.distortion.is_zero else self.yarn_box
         out = []
         for yarn in self.yarns():
-            tube = yarn_mesh(yarn.nodes, yarn.outline, self.samples_per_mm, end_tangents=yarn.end_tangents)
+            try:
+                tube = yarn.mesh(self.samples_per_mm, within)
+            except WeaveError as exc:
+                hint = "" if self.distortion.is_zero else (
+                    f" (distortion seed {self.seed}: lower the {yarn.family}'s node displacement, section scale or "
+                    "the waviness, or try another seed)")
+                raise WeaveError(f"yarn {yarn.name}: {exc}{hint}") from None
             cut = _to_manifold(tube) ^ clip
-            if cut.is_empty():
-                raise WeaveError(f"yarn {yarn.name} lies outside the sample box")
-            out.append((yarn, _from_manifold(cut)))
+            length = hi[0] - lo[0] if yarn.family == "weft" else hi[1] - lo[1]
+            if cut.volume() >= REMNANT_FRACTION * polygon_area(yarn.outline) * length:
+                out.append((yarn, _from_manifold(cut)))
         return out
 
     def scene(self, materials=None) -> Scene:

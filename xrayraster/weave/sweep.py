@@ -17,9 +17,11 @@ pieces, each usable on its own:
   Zheng and Liu, "Computation of rotation minimizing frames", ACM Trans. Graph. 27(1), 2008. The
   first frame's height axis is the ``up`` vector made perpendicular to the path, so a yarn that
   starts horizontally starts with its height along +z.
-- **Sweep** (:func:`sweep`): the tube through the sections, capped at both ends by a fan from the
-  outline's centroid (valid because the outlines above are star-shaped about it; :func:`sweep`
-  checks that every fan triangle is positive, so a non-star outline is refused, not mis-meshed).
+- **Sweep** (:func:`sweep`): the tube through the sections (one outline, or one per sample: per-node
+  scale and rotation carried to every sample by :func:`smooth_profile`, C² and never overshooting,
+  and applied by :func:`section_outlines`), capped at both ends by a fan from the outline's
+  centroid (valid because the outlines above are star-shaped about it; :func:`sweep` checks that
+  every fan triangle is positive, so a non-star outline is refused, not mis-meshed).
   The result is watertight, 2-manifold, outward-oriented and free of degenerate triangles; every
   triangle's area is checked after building.
 
@@ -53,22 +55,10 @@ from .sections import (
     rounded_rectangle_area,
 )
 
-__all__ = [
-    "CubicSpline3",
-    "ellipse",
-    "ellipse_area",
-    "lenticular",
-    "lenticular_area",
-    "polygon_area",
-    "power_ellipse",
-    "power_ellipse_area",
-    "rotation_minimising_frames",
-    "rounded_rectangle",
-    "rounded_rectangle_area",
-    "sample_path",
-    "sweep",
-    "yarn_mesh",
-]
+__all__ = ["CubicSpline3", "ellipse", "ellipse_area", "lenticular", "lenticular_area", "polygon_area",
+           "power_ellipse", "power_ellipse_area", "rotation_minimising_frames", "rounded_rectangle",
+           "rounded_rectangle_area", "sample_path", "section_outlines", "smooth_profile", "sweep",
+           "yarn_mesh"]
 
 
 # --------------------------------------------------------------------------------------------
@@ -160,10 +150,9 @@ def sample_path(spline: CubicSpline3, samples_per_mm: float, *, table_per_interv
     rate = float(samples_per_mm)
     if not (math.isfinite(rate) and rate > 0):
         raise WeaveError(f"samples_per_mm must be a positive number, got {samples_per_mm!r}")
-    fine = np.concatenate([
-        np.linspace(spline.knots[i], spline.knots[i + 1], table_per_interval, endpoint=False)
-        for i in range(len(spline.knots) - 1)
-    ] + [spline.knots[-1:]])
+    knots = spline.knots  # table_per_interval points per interval, as np.linspace(.., endpoint=False) puts them
+    step = np.diff(knots) / table_per_interval
+    fine = np.concatenate([(np.arange(table_per_interval) * step[:, None] + knots[:-1, None]).ravel(), knots[-1:]])
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(spline(fine), axis=0), axis=1))])
     intervals = max(1, math.ceil(arc[-1] * rate))
     params = np.interp(np.linspace(0.0, arc[-1], intervals + 1), arc, fine)
@@ -173,6 +162,38 @@ def sample_path(spline: CubicSpline3, samples_per_mm: float, *, table_per_interv
     if np.any(speed <= 0):
         raise WeaveError("the path has a cusp (zero tangent); move the nodes apart or clamp its ends")
     return spline(params), tangents / speed[:, None], params
+
+
+def smooth_profile(knots, values, t) -> np.ndarray:
+    """C² interpolation of per-knot ``values`` ``(m, ...)`` at parameters ``t``; ``(len(t), ...)``.
+
+    Between knots i and i + 1 the value moves from ``values[i]`` to ``values[i + 1]`` along the
+    quintic smootherstep ``τ³(10 − 15τ + 6τ²)`` (τ the fraction of the interval), whose first and
+    second derivatives vanish at both ends: C², the values at the knots and, unlike a cubic spline,
+    never outside its two neighbouring values (a scale drawn in [1 − a, 1 + a] stays there).
+    """
+    knots, values = np.asarray(knots, dtype=np.float64), np.asarray(values, dtype=np.float64)
+    t = np.clip(np.asarray(t, dtype=np.float64), knots[0], knots[-1])
+    i = np.clip(np.searchsorted(knots, t, side="right") - 1, 0, len(knots) - 2)
+    tau = (t - knots[i]) / (knots[i + 1] - knots[i])
+    step = (tau**3 * (10.0 - 15.0 * tau + 6.0 * tau**2)).reshape((-1,) + (1,) * (values.ndim - 1))
+    return values[i] + (values[i + 1] - values[i]) * step
+
+
+def section_outlines(outline, scale, rotation_deg) -> np.ndarray:
+    """One outline per sample, ``(n, k, 2)``: ``outline`` ``(k, 2)`` scaled, then turned about its origin.
+
+    ``scale`` ``(n, 2)`` multiplies u (width) and v (height); ``rotation_deg`` ``(n,)`` turns the
+    scaled outline counter-clockwise in the (u, v) plane, i.e. about the path's tangent. Positive
+    scales and a rotation keep the outline counter-clockwise and star-shaped about its origin.
+    """
+    shape = np.asarray(outline, dtype=np.float64)
+    scale = np.asarray(scale, dtype=np.float64)
+    angle = np.radians(np.asarray(rotation_deg, dtype=np.float64))
+    u = shape[None, :, 0] * scale[:, 0, None]
+    v = shape[None, :, 1] * scale[:, 1, None]
+    cos, sin = np.cos(angle)[:, None], np.sin(angle)[:, None]
+    return np.stack([u * cos - v * sin, u * sin + v * cos], axis=-1)
 
 
 # --------------------------------------------------------------------------------------------
@@ -205,19 +226,18 @@ def rotation_minimising_frames(points, tangents, up=(0.0, 0.0, 1.0)) -> np.ndarr
     r = r / np.linalg.norm(r)
     normals = np.empty((n, 3))
     normals[0] = r
-    for i in range(n - 1):
-        v1 = x[i + 1] - x[i]
-        c1 = np.dot(v1, v1)
+    for i, v1 in enumerate(np.diff(x, axis=0)):
+        c1 = v1.dot(v1)
         if c1 == 0:
             normals[i + 1] = r
             continue
-        r_l = r - (2 / c1) * np.dot(v1, r) * v1
-        t_l = t[i] - (2 / c1) * np.dot(v1, t[i]) * v1
+        r_l = r - (2 / c1) * v1.dot(r) * v1
+        t_l = t[i] - (2 / c1) * v1.dot(t[i]) * v1
         v2 = t[i + 1] - t_l
-        c2 = np.dot(v2, v2)
-        r = r_l - (2 / c2) * np.dot(v2, r_l) * v2 if c2 > 0 else r_l
-        r = r - np.dot(r, t[i + 1]) * t[i + 1]  # removes rounding drift only (about 1e-16)
-        r = r / np.linalg.norm(r)
+        c2 = v2.dot(v2)
+        r = r_l - (2 / c2) * v2.dot(r_l) * v2 if c2 > 0 else r_l
+        r = r - r.dot(t[i + 1]) * t[i + 1]  # removes rounding drift only (about 1e-16)
+        r = r / math.sqrt(r.dot(r))
         normals[i + 1] = r
     frames = np.empty((n, 3, 3))
     frames[:, 0] = t
@@ -231,8 +251,8 @@ def rotation_minimising_frames(points, tangents, up=(0.0, 0.0, 1.0)) -> np.ndarr
 # --------------------------------------------------------------------------------------------
 
 
-def _check_bends(points: np.ndarray, frames: np.ndarray, outline: np.ndarray) -> None:
-    """Refuse a path that bends tighter than the section reaches toward the bend's centre."""
+def _check_bends(points: np.ndarray, frames: np.ndarray, outlines: np.ndarray) -> None:
+    """Refuse a path that bends tighter than its section (``outlines`` ``(n, k, 2)``) reaches toward the bend's centre."""
     if len(points) < 3:
         return
     p0, p1, p2 = points[:-2], points[1:-1], points[2:]
@@ -251,7 +271,7 @@ def _check_bends(points: np.ndarray, frames: np.ndarray, outline: np.ndarray) ->
     # how far the section reaches toward the centre: max over outline of (u U + v V) · inward
     du = np.einsum("ij,ij->i", frames[rows, 1], inward)
     dv = np.einsum("ij,ij->i", frames[rows, 2], inward)
-    reach = (outline[:, 0][None, :] * du[:, None] + outline[:, 1][None, :] * dv[:, None]).max(axis=1)
+    reach = (outlines[rows, :, 0] * du[:, None] + outlines[rows, :, 1] * dv[:, None]).max(axis=1)
     bad = reach >= radius
     if np.any(bad):
         j = int(np.argmax(reach - radius))
@@ -267,37 +287,43 @@ def sweep(path_points, outline, frames, cap: bool = True):
     """The tube through ``outline`` placed at each path point in its frame: ``(vertices, faces)``.
 
     ``path_points`` ``(n, 3)`` mm, n >= 2; ``outline`` ``(k, 2)`` counter-clockwise, in the section's
-    (u, v) axes; ``frames`` ``(n, 3, 3)`` rows [T, U, V] as :func:`rotation_minimising_frames`
-    gives. Section i's point j is ``P_i + u_j U_i + v_j V_i``. With ``cap`` both ends are closed by
-    a fan from the outline's centroid (the outline must be star-shaped about it, which is checked):
-    the mesh is then watertight, 2-manifold and outward-oriented. Returns float64 vertices
-    ``(n k + 2, 3)`` and int64 faces. Raises :class:`WeaveError` for a bend tighter than the
-    section (see the module's bend limit) or a degenerate triangle.
+    (u, v) axes, or ``(n, k, 2)``, one per path point (e.g. :func:`section_outlines`); ``frames``
+    ``(n, 3, 3)`` rows [T, U, V] as :func:`rotation_minimising_frames` gives. Section i's point j is
+    ``P_i + u_ij U_i + v_ij V_i``. With ``cap`` both ends are closed by a fan from their outline's
+    centroid (checked to be star-shaped about it): the mesh is then watertight, 2-manifold and
+    outward-oriented. Returns float64 vertices ``(n k + 2, 3)`` and int64 faces. Raises
+    :class:`WeaveError` for a bend tighter than the section there (the module's bend limit) or a
+    degenerate triangle.
     """
     points = np.asarray(path_points, dtype=np.float64)
     shape = np.asarray(outline, dtype=np.float64)
     frames = np.asarray(frames, dtype=np.float64)
     if points.ndim != 2 or points.shape[1] != 3 or len(points) < 2:
         raise WeaveError(f"path_points must be (n, 3) with n >= 2, got shape {points.shape}")
-    if shape.ndim != 2 or shape.shape[1] != 2 or len(shape) < 3:
-        raise WeaveError(f"outline must be (k, 2) with k >= 3, got shape {shape.shape}")
+    if shape.ndim not in (2, 3) or shape.shape[-1] != 2 or shape.shape[-2] < 3 or (
+            shape.ndim == 3 and len(shape) != len(points)):
+        raise WeaveError(f"outline must be (k, 2), or (n, k, 2) with n = {len(points)} path points, and k >= 3; "
+                         f"got shape {shape.shape}")
     if frames.shape != (len(points), 3, 3):
         raise WeaveError(f"frames must be (n, 3, 3) = {(len(points), 3, 3)}, got {frames.shape}")
     if not (np.all(np.isfinite(points)) and np.all(np.isfinite(shape)) and np.all(np.isfinite(frames))):
         raise WeaveError("path_points, outline and frames must be finite")
-    if polygon_area(shape) <= 0:
+    shapes = np.broadcast_to(shape, (len(points),) + shape.shape[-2:])
+    x, y = shape[..., 0], shape[..., 1]  # the shoelace area of every distinct outline
+    if np.any(np.sum(x * np.roll(y, -1, axis=-1) - np.roll(x, -1, axis=-1) * y, axis=-1) <= 0):
         raise WeaveError("outline must be counter-clockwise (positive area); reverse its points")
-    centroid = polygon_centroid(shape)
-    rel = shape - centroid
-    fan = rel[:, 0] * np.roll(rel[:, 1], -1) - rel[:, 1] * np.roll(rel[:, 0], -1)
-    if cap and np.any(fan <= 0):
-        raise WeaveError("outline is not star-shaped about its centroid, so a fan cannot cap it; "
-                         "use a convex or star-shaped cross-section")
-    _check_bends(points, frames, shape)
+    ends = [polygon_centroid(shapes[i]) for i in (0, -1)]
+    for i, centroid in zip((0, -1), ends):
+        rel = shapes[i] - centroid
+        fan = rel[:, 0] * np.roll(rel[:, 1], -1) - rel[:, 1] * np.roll(rel[:, 0], -1)
+        if cap and np.any(fan <= 0):
+            raise WeaveError("outline is not star-shaped about its centroid, so a fan cannot cap it; "
+                             "use a convex or star-shaped cross-section")
+    _check_bends(points, frames, shapes)
 
-    n, k = len(points), len(shape)
-    rings = (points[:, None, :] + shape[None, :, 0, None] * frames[:, None, 1]
-             + shape[None, :, 1, None] * frames[:, None, 2])
+    n, k = shapes.shape[:2]
+    rings = (points[:, None, :] + shapes[:, :, 0, None] * frames[:, None, 1]
+             + shapes[:, :, 1, None] * frames[:, None, 2])
     vertices = rings.reshape(-1, 3)
     i = np.arange(n - 1)[:, None]
     j = np.arange(k)[None, :]
@@ -307,7 +333,9 @@ def sweep(path_points, outline, frames, cap: bool = True):
     d = b + k
     faces = [np.stack([a, b, d], axis=-1).reshape(-1, 3), np.stack([a, d, c], axis=-1).reshape(-1, 3)]
     if cap:
-        ends = np.array([points[0], points[-1]]) + centroid[0] * frames[[0, -1], 1] + centroid[1] * frames[[0, -1], 2]
+        centres = np.array(ends)
+        ends = (np.array([points[0], points[-1]]) + centres[:, :1] * frames[[0, -1], 1]
+                + centres[:, 1:] * frames[[0, -1], 2])
         start, end = n * k, n * k + 1
         jj = np.arange(k)
         faces.append(np.column_stack([np.full(k, start), (jj + 1) % k, jj]))
@@ -324,15 +352,48 @@ def sweep(path_points, outline, frames, cap: bool = True):
     return vertices, faces
 
 
-def yarn_mesh(nodes, outline, samples_per_mm: float, up=(0.0, 0.0, 1.0), end_tangents=None) -> trimesh.Trimesh:
+def _span_near(points, frames, outlines, box) -> slice:
+    """The samples a tube clipped to ``box`` ((2, 3) mm) needs: each dropped run of end rings lies wholly
+    beyond one face plane, as does the kept ring next to it, so the clipped solid is the same."""
+    rings = points[:, None] + outlines[..., :1] * frames[:, None, 1] + outlines[..., 1:] * frames[:, None, 2]
+    beyond = np.concatenate([rings.max(axis=1) < box[0], rings.min(axis=1) > box[1]], axis=1)  # (n, 6 faces)
+    n = len(points)
+    lead, trail = (int(np.where(b.all(axis=0), n, b.argmin(axis=0)).max()) for b in (beyond, beyond[::-1]))
+    # a path that never meets the box is left whole (its clip is empty either way)
+    return slice(0, n) if lead + trail >= n else slice(max(lead - 1, 0), n - max(trail - 1, 0))
+
+
+def yarn_mesh(nodes, outline, samples_per_mm: float, up=(0.0, 0.0, 1.0), end_tangents=None,
+              section_scale=None, section_rotation_deg=None, within=None) -> trimesh.Trimesh:
     """A closed yarn: ``outline`` swept along the natural (or clamped) C² spline through ``nodes``.
 
     The path is sampled at ``samples_per_mm`` along arc length, framed by rotation-minimising
-    frames whose height axis starts along ``up``, swept and capped. Returns an unprocessed
-    ``trimesh.Trimesh`` (the vertices and faces exactly as :func:`sweep` built them).
+    frames whose height axis starts along ``up``, swept and capped. ``section_scale`` ``(m, 2)``
+    (width and height factors) and ``section_rotation_deg`` ``(m,)`` (about the tangent), one per
+    node, vary the section along the yarn: :func:`smooth_profile` carries them to every sample
+    (C², within the node values) and :func:`section_outlines` applies them; give both or neither.
+    ``within``, a ``(2, 3)`` box (mm) the tube will be clipped to, drops the rings beyond one of its
+    faces but the one nearest the box: the same solid once clipped, with fewer triangles. Returns
+    an unprocessed ``trimesh.Trimesh`` (the vertices and faces exactly as :func:`sweep` built them).
     """
+    if (section_scale is None) != (section_rotation_deg is None):
+        raise WeaveError("section_scale and section_rotation_deg go together: give both (one per node) or neither")
+    if section_scale is not None:
+        scale, angle = np.asarray(section_scale, dtype=np.float64), np.asarray(section_rotation_deg, dtype=np.float64)
+        m = len(nodes)
+        if scale.shape != (m, 2) or angle.shape != (m,):
+            raise WeaveError(f"section_scale must be ({m}, 2) and section_rotation_deg ({m},), one per node; "
+                             f"got {scale.shape} and {angle.shape}")
+        if not (np.all(np.isfinite(scale)) and np.all(scale > 0) and np.all(np.isfinite(angle))):
+            raise WeaveError("section_scale must be positive and finite, section_rotation_deg finite")
     spline = CubicSpline3(nodes, end_tangents)
-    points, tangents, _ = sample_path(spline, samples_per_mm)
+    points, tangents, params = sample_path(spline, samples_per_mm)
     frames = rotation_minimising_frames(points, tangents, up)
+    if section_scale is not None:
+        outline = section_outlines(outline, smooth_profile(spline.knots, scale, params),
+                                   smooth_profile(spline.knots, angle, params))
+    if within is not None:
+        keep = _span_near(points, frames, np.asarray(outline, dtype=np.float64), np.asarray(within, dtype=np.float64))
+        points, frames, outline = points[keep], frames[keep], outline[keep] if np.ndim(outline) == 3 else outline
     vertices, faces = sweep(points, outline, frames, cap=True)
     return trimesh.Trimesh(vertices=vertices, faces=faces, process=False)

@@ -5,11 +5,12 @@ The key-by-key mapping is documented in docs/weave.md.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from ..core import fields
 from ..core.errors import ConfigError, WeaveError
 from ..core.validate import show
+from .distort import Distortion
 from .spec import Section, UnitCell
 
 __all__ = ["TEXTOMOS_KEYS", "TextomosImport", "read_textomos"]
@@ -27,16 +28,22 @@ TEXTOMOS_KEYS = _TEXTOMOS_CELL + _TEXTOMOS_OPTIONAL
 
 @dataclass(frozen=True)
 class TextomosImport:
-    """What a textomos textile section describes: the cell, and the sample-level settings."""
+    """What a textomos textile section describes: the cell, and the sample-level settings.
+
+    ``deform`` is textomos' 12-number vector as given; ``distortion`` is its meaning here
+    (:meth:`Distortion.from_textomos`), ready for ``Sample(..., distortion=...)``.
+    """
 
     cell: UnitCell
     tiling: tuple[int, int, int] = (1, 1, 1)
     deform: tuple[float, ...] = ()
     shift_unit_cell: bool = False
+    distortion: Distortion = field(default_factory=Distortion)
 
 
 def read_textomos(d: dict, where: str = "textomos textile") -> TextomosImport:
-    """A textomos ``layer2layer`` textile section as a :class:`UnitCell` plus tiling, deform, shift.
+    """A textomos ``layer2layer`` textile section as a :class:`UnitCell` plus tiling, deform (and its
+    :class:`Distortion`), shift.
 
     Strict: keys outside :data:`TEXTOMOS_KEYS` are refused (pass the textile keys only, e.g.
     ``{k: v for k, v in config.items() if k in TEXTOMOS_KEYS}``).
@@ -96,7 +103,11 @@ def read_textomos(d: dict, where: str = "textomos textile") -> TextomosImport:
     if not isinstance(deform, list) or len(deform) not in (0, 12):
         raise ConfigError(f"{where}: deform must be a list of 12 numbers (or empty), got {show(deform)}")
     deform = tuple(fields.number(x, f"deform[{i}]", where, nonnegative=True) for i, x in enumerate(deform))
+    try:
+        distortion = Distortion.from_textomos(deform)
+    except WeaveError as exc:
+        raise ConfigError(f"{where}: {exc}") from None
     shift_cells = d.get("shift_unit_cell", False)
     if not isinstance(shift_cells, bool):
         raise ConfigError(f"{where}: shift_unit_cell must be true or false, got {show(shift_cells)}")
-    return TextomosImport(cell=cell, tiling=tiling, deform=deform, shift_unit_cell=shift_cells)
+    return TextomosImport(cell=cell, tiling=tiling, deform=deform, shift_unit_cell=shift_cells, distortion=distortion)
