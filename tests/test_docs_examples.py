@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import os
 import re
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -126,11 +127,17 @@ def test_toml_scene_renders_every_material(doc, line, text, expect, tmp_path, gl
 
 
 def test_bundled_examples_are_quoted_verbatim_in_the_format_reference():
+    """Scene files in docs/scene-format.md (loaded there as toml blocks), weave files in docs/weave.md."""
     quoted = {text.strip() for doc, _, text, _ in TOML if doc.name == "scene-format.md"}
+    weave_doc = (ROOT / "docs" / "weave.md").read_text()
     examples = sorted((ROOT / "examples").glob("*.toml"))
     assert examples
     for example in examples:
-        assert example.read_text().strip() in quoted, f"{example.name} differs from its copy in docs/scene-format.md"
+        text = example.read_text().strip()
+        if "weave" in tomllib.loads(text):
+            assert f"```text\n{text}\n```" in weave_doc, f"{example.name} differs from its copy in docs/weave.md"
+        else:
+            assert text in quoted, f"{example.name} differs from its copy in docs/scene-format.md"
 
 
 def _readme_commands() -> list[str]:

@@ -77,7 +77,7 @@ import trimesh
 from xrayraster.core.errors import WeaveError
 from xrayraster.core.validate import show
 from xrayraster.weave import Section, UnitCell
-from xrayraster.weave.sample import _to_manifold
+from xrayraster.weave.manifold_mesh import to_manifold
 from xrayraster.weave.sections import (
     ellipse_area,
     lenticular_area,
@@ -289,7 +289,7 @@ def yarn_overlap(meshes) -> tuple[float, int]:
     solids, boxes = [], []
     for mesh in meshes:
         try:
-            solids.append(_to_manifold(mesh))
+            solids.append(to_manifold(mesh))
         except WeaveError:
             continue
         boxes.append(mesh.bounds)

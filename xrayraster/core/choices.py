@@ -14,6 +14,9 @@ RECONSTRUCTION_INPUTS = ("lineint", "transmission")  # what a projection stack h
 FILTERS = ("ram-lak", "shepp-logan", "cosine", "hamming", "hann")  # ramp-filter windows
 SCAN_KINDS = ("auto", "full", "short")  # FDK redundancy weighting
 VOXELIZE_METHODS = ("exact", "stencil")
+MESH_FORMATS = ("stl", "ply")  # mesh files a woven sample is exported as
+WEAVE_RESOLVE = ("priority", "boolean")  # how overlapping yarns are settled
+EXPORT_PER = ("family", "yarn")  # one mesh file per yarn family or per yarn
 
 
 def check_choice(value, choices: tuple[str, ...], field: str, error: type[Exception]) -> str:

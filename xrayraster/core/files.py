@@ -14,10 +14,14 @@ from __future__ import annotations
 
 import os
 import re
+import shutil
 import socket
 import tempfile
 import zlib
+from contextlib import contextmanager
 from pathlib import Path
+
+from .errors import ConfigError
 
 
 def _read_umask() -> int:
@@ -28,7 +32,9 @@ def _read_umask() -> int:
 
 
 # The mode that open(path, "w") gives a new file; mkstemp's temporaries are private (0600).
-NEW_FILE_MODE = 0o666 & ~_read_umask()
+_UMASK = _read_umask()
+NEW_FILE_MODE = 0o666 & ~_UMASK
+NEW_DIR_MODE = 0o777 & ~_UMASK  # what mkdir gives; mkdtemp's are private (0700)
 
 # Eight hex digits naming this host in temporaries' names (a CRC of the host name): process ids
 # are only meaningful on the host (and in the process namespace) that issued them.
@@ -99,3 +105,36 @@ def atomic_write(path, write) -> Path:
         Path(tmp).unlink(missing_ok=True)
         raise
     return path
+
+
+@contextmanager
+def atomic_directory(path, *, replaceable):
+    """Build a directory of outputs under a temporary name beside ``path``, then move it into place.
+
+    Yields the temporary directory (a ``Path``) to write into. On success an existing ``path`` is
+    replaced only if ``replaceable(path)`` says it holds an earlier output of the same command
+    (else :class:`~xrayraster.core.errors.ConfigError`, checked before any work); readers see the
+    old directory or the new one, never a mix. On failure the temporary is removed and ``path`` is
+    untouched. The swap is two renames (old aside, new in); a crash between them leaves the old
+    output under ``.NAME.old.<host>.<pid>`` and no ``path``, never a half-written one.
+    """
+    path = Path(path)
+    if path.exists() and not (path.is_dir() and (not any(path.iterdir()) or replaceable(path))):
+        what = "a file" if not path.is_dir() else "a directory that holds other files"
+        raise ConfigError(f"{path} is {what}, not an earlier output of this command; choose another output "
+                          "directory or remove it")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.{HOST_TAG}.{os.getpid()}."))
+    try:
+        yield tmp
+        os.chmod(tmp, NEW_DIR_MODE)
+        if path.exists():
+            old = path.parent / f".{path.name}.old.{HOST_TAG}.{os.getpid()}"
+            os.replace(path, old)
+            os.replace(tmp, path)
+            shutil.rmtree(old)
+        else:
+            os.replace(tmp, path)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise

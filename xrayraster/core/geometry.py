@@ -188,6 +188,31 @@ class ConeBeamGeometry(_ScanGeometry):
     def beam(self) -> str:
         return "cone"
 
+    @classmethod
+    def framing(cls, radius: float, half_height: float, *, num_views: int = 360, magnification: float = 2.0,
+                columns: int = 256) -> "ConeBeamGeometry":
+        """A full-circle scan whose detector just sees a sample from every angle.
+
+        The sample is anything inside the cylinder of ``radius`` (mm) about the rotation axis and
+        ``half_height`` (mm) above and below the origin. The source sits at five radii (a cone
+        angle of about 23°, usual for micro-CT), the detector at ``magnification`` times that from
+        the source, and ``columns`` square pixels span the cylinder's shadow with a 2 % margin;
+        the rows cover the shadow of its near rim (the tallest), with the same margin.
+        """
+        r = finite("radius", radius, positive=True)
+        h = finite("half_height", half_height, positive=True)
+        m = finite("magnification", magnification, positive=True)
+        if m <= 1.0:
+            raise GeometryError(f"magnification must exceed 1 (the detector lies beyond the axis), got {m}")
+        n = positive_ints("columns", columns, 1)[0]
+        sod = 5.0 * r
+        sdd = m * sod
+        half_u = sdd * r / math.sqrt(sod * sod - r * r)   # the cylinder's tangent rays
+        half_v = sdd * h / (sod - r)                     # its near rim's top and bottom
+        pixel = 2.04 * half_u / n
+        rows = math.ceil(2.04 * half_v / pixel)
+        return cls(sod, sdd, (rows, n), pixel, full_circle(num_views))
+
     def to_vec(self) -> "VectorGeometry":
         rows = []
         (pv, pu), (ov, ou) = self.pixel_size, self.detector_offset

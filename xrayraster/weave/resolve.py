@@ -26,7 +26,8 @@ import trimesh
 
 from ..core.errors import WeaveError
 from ..core.validate import show
-from .sample import PRIORITIES, Yarn, _from_manifold, _to_manifold
+from .manifold_mesh import from_manifold, to_manifold
+from .yarn import PRIORITIES, Yarn
 
 __all__ = ["NOISE", "Interpenetration", "Resolved", "interpenetration", "resolve_boolean"]
 
@@ -89,7 +90,7 @@ def interpenetration(pieces) -> Interpenetration:
     Every pair whose bounding boxes overlap is intersected exactly (manifold3d, float64).
     """
     yarns, meshes = _check_pieces(pieces)
-    solids = [_to_manifold(m) for m in meshes]
+    solids = [to_manifold(m) for m in meshes]
     return _measure(yarns, solids, *_candidates(_bounds(solids)))[0]
 
 
@@ -103,7 +104,7 @@ def resolve_boolean(pieces, box) -> Resolved:
     """
     yarns, meshes = _check_pieces(pieces)
     lo, hi = _check_box(box, yarns, meshes)
-    solids = [_to_manifold(m) for m in meshes]
+    solids = [to_manifold(m) for m in meshes]
     bounds = _bounds(solids)
     first, second = _candidates(bounds)
     before, cut = _measure(yarns, solids, first, second)
@@ -139,7 +140,7 @@ def resolve_boolean(pieces, box) -> Resolved:
     # touching faces between its meshes) keeps matrix + yarns = box to float64 rounding.
     box_solid = manifold3d.Manifold.cube(tuple(hi - lo)).translate(tuple(lo))
     matrix = manifold3d.Manifold.batch_boolean([box_solid, *solids], manifold3d.OpType.Subtract)
-    return Resolved(tuple((y, _from_manifold(s)) for y, s in zip(out_yarns, out_solids)), _from_manifold(matrix),
+    return Resolved(tuple((y, from_manifold(s)) for y, s in zip(out_yarns, out_solids)), from_manifold(matrix),
                     tuple(dropped), before, after)
 
 

@@ -30,30 +30,38 @@ weft over matrix) resolve the shared space.
 from __future__ import annotations
 
 import math
+import sys
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
 import trimesh
+from tqdm.auto import tqdm
 
+from ..core.choices import EXPORT_PER, WEAVE_RESOLVE, check_choice
 from ..core.errors import WeaveError
 from ..core.validate import show
 from ..scene.scene import Scene
 from .distort import Distortion, layer_shift, yarn_draws, yarn_rng
-from .materials import as_yarn_materials
-from .spec import Section, UnitCell
-from .sweep import (
-    ellipse,
-    lenticular,
-    polygon_area,
-    power_ellipse,
-    rounded_rectangle,
-    yarn_mesh,
+from .export import (
+    Part,
+    material_entry,
+    merge_meshes,
+    mesh_bounds,
+    occupied_volumes,
+    settle,
+    write_parts,
+    write_report,
 )
+from .manifold_mesh import from_manifold, to_manifold
+from .materials import as_yarn_materials
+from .resolve import interpenetration, resolve_boolean
+from .spec import UnitCell
+from .sweep import polygon_area
+from .yarn import LABELS, PRIORITIES, Yarn, section_outline
 
+# LABELS, PRIORITIES, Yarn and section_outline live in .yarn; re-exported here, where users meet them
 __all__ = ["LABELS", "PLATEAU", "PRIORITIES", "REMNANT_FRACTION", "Sample", "Yarn", "section_outline"]
-
-LABELS = {"matrix": 1, "weft": 2, "warp": 3}
-PRIORITIES = {"matrix": 0, "weft": 1, "warp": 2}
 
 #: Binder nodes per weft column, as offsets along y in units of the weft's half-width from the
 #: column's centre, all at the column's gap height: the binder runs flat over/under the middle half
@@ -69,37 +77,10 @@ PLATEAU = (-0.5, -0.45, 0.45, 0.5)
 REMNANT_FRACTION = 0.1
 
 
-def section_outline(section: Section, width: float, height: float, k: int) -> np.ndarray:
-    """The ``(k, 2)`` outline (mm) of ``section`` for a yarn ``width`` × ``height``."""
-    if section.shape == "ellipse":
-        return ellipse(width, height, k)
-    if section.shape == "lenticular":
-        return lenticular(width, height, k)
-    if section.shape == "power_ellipse":
-        return power_ellipse(width, height, section.exponent, k)
-    if section.shape == "rounded_rectangle":
-        return rounded_rectangle(width, height, section.corner, k)
-    raise WeaveError(f"unknown section shape {section.shape!r}")  # pragma: no cover (Section checks)
-
-
-@dataclass(frozen=True)
-class Yarn:
-    """One yarn of a sample: its family (``weft`` or ``warp``), kind, centre-line nodes (mm) and outline."""
-
-    name: str
-    family: str
-    kind: str  # "weft", "binder" or "stuffer"
-    nodes: np.ndarray
-    outline: np.ndarray
-    end_tangents: tuple | None = None  # clamped unit end tangents of the path, or None (natural)
-    section_scale: np.ndarray | None = None  # (m, 2) width/height factors per node, or None (constant)
-    section_rotation_deg: np.ndarray | None = None  # (m,) section rotation per node, or None
-
-    def mesh(self, samples_per_mm: float, within=None) -> trimesh.Trimesh:
-        """The closed, unclipped tube of this yarn (:func:`~xrayraster.weave.sweep.yarn_mesh`, ``within`` a box)."""
-        return yarn_mesh(self.nodes, self.outline, samples_per_mm, end_tangents=self.end_tangents,
-                         section_scale=self.section_scale, section_rotation_deg=self.section_rotation_deg,
-                         within=within)
+def _stage(show_it: bool, text: str) -> None:
+    """One line of progress on stderr, between the progress bars."""
+    if show_it:
+        print(f"weave: {text}", file=sys.stderr, flush=True)
 
 
 _FLAT = ((0.0, 1.0, 0.0), (0.0, 1.0, 0.0))  # a binder's clamped end tangents: flat, along +y
@@ -115,23 +96,6 @@ def _count(name: str, value) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
         raise WeaveError(f"{name} must be an integer >= 1, got {show(value)}")
     return int(value)
-
-
-def _to_manifold(mesh: trimesh.Trimesh):
-    import manifold3d
-
-    solid = manifold3d.Manifold(manifold3d.Mesh64(
-        vert_properties=np.array(mesh.vertices, dtype=np.float64, order="C"),
-        tri_verts=np.array(mesh.faces, dtype=np.uint64, order="C")))
-    if solid.status() != manifold3d.Error.NoError:
-        raise WeaveError(f"manifold3d cannot read a yarn mesh ({solid.status()})")
-    return solid
-
-
-def _from_manifold(solid) -> trimesh.Trimesh:
-    out = solid.to_mesh64()
-    return trimesh.Trimesh(vertices=np.array(np.asarray(out.vert_properties)[:, :3], dtype=np.float64),
-                           faces=np.array(out.tri_verts, dtype=np.int64), process=False)
 
 
 @dataclass(frozen=True)
@@ -310,11 +274,12 @@ class Sample:
         lo, hi = self.box
         return trimesh.creation.box(bounds=np.array([lo, hi]))
 
-    def meshes(self) -> list[tuple[Yarn, trimesh.Trimesh]]:
+    def meshes(self, progress: bool = False) -> list[tuple[Yarn, trimesh.Trimesh]]:
         """Each yarn swept (``yarn_mesh``) and clipped exactly to the yarn box (manifold3d, float64).
 
         A clipped yarn under :data:`REMNANT_FRACTION` of a full one (its outline's area times the
         box's length along it) is left out: a sliver of a neighbouring period's yarn along a side face.
+        ``progress``: a tqdm bar over the yarns on stderr.
         """
         import manifold3d
 
@@ -324,7 +289,7 @@ class Sample:
         # first (the same solid once clipped); the regular weave's stays whole, as it always was
         within = None if self.distortion.is_zero else self.yarn_box
         out = []
-        for yarn in self.yarns():
+        for yarn in tqdm(self.yarns(), desc="yarns", unit="yarn", disable=not progress, leave=False):
             try:
                 tube = yarn.mesh(self.samples_per_mm, within)
             except WeaveError as exc:
@@ -332,33 +297,121 @@ class Sample:
                     f" (distortion seed {self.seed}: lower the {yarn.family}'s node displacement, section scale or "
                     "the waviness, or try another seed)")
                 raise WeaveError(f"yarn {yarn.name}: {exc}{hint}") from None
-            cut = _to_manifold(tube) ^ clip
+            cut = to_manifold(tube, yarn.name) ^ clip
             length = hi[0] - lo[0] if yarn.family == "weft" else hi[1] - lo[1]
             if cut.volume() >= REMNANT_FRACTION * polygon_area(yarn.outline) * length:
-                out.append((yarn, _from_manifold(cut)))
+                out.append((yarn, from_manifold(cut)))
         return out
 
-    def scene(self, materials=None) -> Scene:
+    def parts(self, materials=None, *, per: str = "yarn", resolve: str = "priority", measure: bool = True,
+              progress: bool = False) -> tuple[list[Part], dict]:
+        """The sample's objects (:class:`~xrayraster.weave.export.Part`) and how much its yarns overlap.
+
+        ``materials`` as for :meth:`scene`. ``per="yarn"``: the matrix and one part per yarn;
+        ``"family"``: the matrix, the wefts, the warps (each family one mesh, the union of its yarns)
+        and one part per tracer yarn (tracers come last, so they win priority ties). ``resolve="boolean"``
+        makes every mesh disjoint, higher priority keeping shared space (per yarn
+        :func:`~xrayraster.weave.resolve.resolve_boolean`, per family
+        :func:`~xrayraster.weave.export.settle`), the matrix the box minus the yarns; ``"priority"``
+        leaves the overlaps to the scene's priorities. The dict gives the interpenetration (mm³)
+        between yarns ``before`` and ``after`` resolving (``after`` None for ``"priority"``); with
+        ``measure=False`` it is empty unless the per-yarn boolean measured it anyway (a scan needs none).
+        """
+        check_choice(per, EXPORT_PER, "per", WeaveError)
+        check_choice(resolve, WEAVE_RESOLVE, "resolve", WeaveError)
+        family_materials, tracers = self._materials(materials)
+        pieces = self.meshes(progress)
+        matrix = self.matrix_mesh()
+        if per == "yarn" and resolve == "boolean":
+            _stage(progress, "resolving every yarn pair (boolean)")
+            resolved = resolve_boolean(pieces, self.box)
+            matrix = resolved.matrix
+            objects = [(yarn.name, yarn.family, mesh) for yarn, mesh in resolved.pieces]
+            overlap = {"before": resolved.before.volume, "after": resolved.after.volume,
+                       "dropped_yarns": list(resolved.dropped)}
+        else:
+            _stage(progress and measure, "measuring the interpenetration of the yarns")
+            overlap = {"before": interpenetration(pieces).volume, "after": None} if measure else {}
+            objects = [(yarn.name, yarn.family, mesh) for yarn, mesh in pieces
+                       if per == "yarn" or yarn.name in tracers]
+            if per == "family":
+                _stage(progress, "merging each family's yarns")
+                objects = [(f, f, merge_meshes([m for y, m in pieces if y.family == f and y.name not in tracers]))
+                           for f in ("weft", "warp")] + objects
+            if resolve == "boolean":  # a few parts: settled here, without touching shells inside a family
+                objects, matrix, after = settle(objects, PRIORITIES, self.box)
+                overlap.update({"after": after} if measure else {})
+        parts = [Part("matrix", "matrix", family_materials["matrix"], LABELS["matrix"], PRIORITIES["matrix"], matrix)]
+        for name, family, mesh in objects:
+            material, label = tracers.get(name, (family_materials[family], None))
+            parts.append(Part(name, family, material, LABELS[family] if label is None else label,
+                              PRIORITIES[family], mesh))
+        return parts, overlap
+
+    def scene(self, materials=None, *, resolve: str = "priority") -> Scene:
         """An ``xr.Scene``: the matrix box (label 1, priority 0), wefts (2, 1) and warps (3, 2).
 
         ``materials``: a :class:`~xrayraster.weave.materials.YarnMaterials`, None for its defaults
         (epoxy, and carbon-fibre bundles at fibre volume fraction 0.6), or a dict of its
         ``matrix``/``weft``/``warp`` fields. A tracer yarn takes its own material and keeps its
-        family's priority, and its family's label unless the tracer gives one.
+        family's priority, and its family's label unless the tracer gives one. ``resolve`` as for
+        :meth:`parts`: scanning needs no boolean, the priorities settle shared space exactly.
         """
+        scene = Scene()
+        for part in self.parts(materials, resolve=resolve, measure=False)[0]:
+            scene.add(part.mesh, part.material, label=part.label, priority=part.priority, name=part.name)
+        return scene
+
+    def export(self, directory, *, materials=None, per: str = "family", fmt: str = "stl",
+               resolve: str = "priority", progress: bool = False) -> dict:
+        """Write the meshes and ``report.json`` into ``directory``; returns the report (docs/weave.md).
+
+        One ``<part>.<fmt>`` file per :meth:`parts` entry (``fmt`` "stl" or "ply"), each written
+        atomically. The report gives the cell, tiling, resolution, seed and distortion; yarn counts;
+        every part's file, family, label, priority and material; the materials (density g/cm³, mass
+        fractions); the box and the meshes' bounds (mm); each family's occupied volume (mm³) and
+        fraction of the box (:func:`~xrayraster.weave.export.occupied_volumes`); and the
+        interpenetration before and after resolving.
+        """
+        start = time.perf_counter()
+        parts, overlap = self.parts(materials, per=per, resolve=resolve, progress=progress)
+        _stage(progress, f"writing {len(parts)} mesh files and measuring the families' volumes")
+        files = write_parts(parts, directory, fmt)
+        volumes = occupied_volumes(parts, PRIORITIES)
+        lo, hi = self.box
+        box_volume = float(np.prod(hi - lo))
+        kinds = [yarn.kind for yarn in self.yarns()]
+        yarns = {kind: kinds.count(kind) for kind in ("weft", "binder", "stuffer")}
+        family_materials = self._materials(materials)[0]
+        keys = [p.family if p.material == family_materials[p.family] else p.name for p in parts]  # tracers: own
+        report = {
+            "cell": self.cell.to_dict(),
+            "cells": list(self.cells), "layers_of_cells": self.layers_of_cells,
+            "points_per_section": self.points_per_section, "samples_per_mm": self.samples_per_mm,
+            "seed": self.seed, "distortion": self.distortion.to_dict(),
+            "resolve": resolve, "per": per, "format": fmt,
+            "yarns": {**yarns, "total": sum(yarns.values())},
+            "triangles": int(sum(len(p.mesh.faces) for p in parts)),
+            "parts": [{"name": p.name, "file": files[p.name], "family": p.family, "label": p.label,
+                       "priority": p.priority, "material": key} for p, key in zip(parts, keys)],
+            "materials": {key: material_entry(p.material) for p, key in zip(parts, keys)},
+            "box_mm": [lo.tolist(), hi.tolist()],
+            "mesh_bounds_mm": mesh_bounds(parts),
+            "volume_mm3": {"box": box_volume, **volumes},
+            "volume_fraction": {f: v / box_volume for f, v in volumes.items()},
+            "interpenetration_mm3": overlap,
+            "seconds": round(time.perf_counter() - start, 3),
+        }
+        write_report(report, directory)
+        return report
+
+    def _materials(self, materials) -> tuple[dict, dict]:
+        """(family → Material, tracer yarn → (Material, label or None)), tracer names checked."""
         chosen = as_yarn_materials(materials)
-        family = chosen.resolve()
         tracers = chosen.tracer_materials()
         names = [yarn.name for yarn in self.yarns()]
         missing = sorted(set(tracers) - set(names))
         if missing:
             raise WeaveError(f"tracers: no yarn named {', '.join(map(repr, missing))} in this sample; name one "
                              f"as Sample.yarns() does, e.g. {names[0]!r} or {names[-1]!r}")
-        scene = Scene()
-        scene.add(self.matrix_mesh(), family["matrix"], label=LABELS["matrix"], priority=PRIORITIES["matrix"],
-                  name="matrix")
-        for yarn, mesh in self.meshes():
-            material, label = tracers.get(yarn.name, (family[yarn.family], None))
-            scene.add(mesh, material, label=LABELS[yarn.family] if label is None else label,
-                      priority=PRIORITIES[yarn.family], name=yarn.name)
-        return scene
+        return chosen.resolve(), tracers
