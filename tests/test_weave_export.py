@@ -85,6 +85,7 @@ def test_every_mesh_file_is_closed_manifold_and_outward(exported, name):
         mesh.merge_vertices()  # STL stores triangle soup
         assert mesh.is_watertight and mesh.is_winding_consistent, part["name"]
         assert mesh.volume > 0 and _manifold_ok(mesh), part["name"]
+        assert mesh.nondegenerate_faces().all(), part["name"]            # trimesh's own test (height > 1e-8)
 
 
 def test_boolean_export_fractions_equal_the_mesh_volumes(exported):

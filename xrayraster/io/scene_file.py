@@ -64,14 +64,19 @@ _MAX_SUBDIVISIONS = 8  # 1.3 million triangles
 _MAX_SECTIONS = 10_000
 
 
-def load_scene_file(path) -> SceneFile:
-    path = Path(path)
+def read_toml(path: Path, kind: str) -> dict:
+    """The tables of the TOML file ``path``; a missing file or bad TOML is a ConfigError naming it."""
     try:
-        data = tomllib.loads(path.read_text())
+        return tomllib.loads(path.read_text())
     except FileNotFoundError:
-        raise ConfigError(f"{path}: no such scene file") from None
+        raise ConfigError(f"{path}: no such {kind}") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+
+
+def load_scene_file(path) -> SceneFile:
+    path = Path(path)
+    data = read_toml(path, "scene file")
     fields.only(data, {"geometry", "objects", "materials", "source", "detector"}, f"{path}")
     if "geometry" not in data:
         raise ConfigError(f"{path}: missing [geometry] table")

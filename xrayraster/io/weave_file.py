@@ -17,7 +17,6 @@ and a tube source, so ``xrayraster render`` and ``xrayraster voxelize`` take it 
 from __future__ import annotations
 
 import json
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -35,7 +34,7 @@ from ..weave.distort import Distortion
 from ..weave.materials import FibreBundle, Tracer, YarnMaterials
 from ..weave.sample import Sample
 from ..weave.spec import UnitCell
-from .scene_file import _library, _materials
+from .scene_file import _library, _materials, read_toml
 
 __all__ = [
     "WeaveFile", "framing_geometry", "load_weave_file", "sample_grid", "weave_from_dict", "write_scan_file",
@@ -63,12 +62,7 @@ class WeaveFile:
 def load_weave_file(path) -> WeaveFile:
     """Read and validate a weave file; errors name the file, the table and the field."""
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: no such weave file") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    data = read_toml(path, "weave file")
     fields.only(data, {"weave", "materials"}, f"{path}")
     if "weave" not in data:
         raise ConfigError(f"{path}: missing [weave] table (the unit cell; every key may be left at its default)")

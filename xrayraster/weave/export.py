@@ -21,7 +21,6 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-import manifold3d
 import numpy as np
 import trimesh
 
@@ -30,7 +29,7 @@ from ..core.errors import WeaveError
 from ..core.files import atomic_write
 from ..core.provenance import package_version
 from ..scene.materials import Material
-from .manifold_mesh import from_manifold, to_manifold, union
+from .manifold_mesh import box_minus, from_manifold, to_manifold, union
 
 __all__ = [
     "REPORT_NAME", "Part", "is_export", "material_entry", "merge_meshes", "mesh_bounds", "occupied_volumes",
@@ -80,7 +79,8 @@ def settle(objects: list[tuple[str, str, trimesh.Trimesh]], priorities: dict[str
     In order of family priority, highest first (a tracer, named apart from its family, before its
     family: it wins ties as in the scene), each object loses what the objects before it hold. Returns
     the objects in their given order with their new meshes, the matrix (``box_mm`` minus all of
-    them) and the volume (mm³) the new meshes still share pairwise (manifold3d, float64: ~0).
+    them, :func:`~xrayraster.weave.manifold_mesh.box_minus`) and the volume (mm³) the new meshes
+    still share pairwise (manifold3d, float64: ~0).
     """
     order = sorted(range(len(objects)), key=lambda i: (-priorities[objects[i][1]], objects[i][0] == objects[i][1]))
     solids: dict[int, object] = {}
@@ -90,11 +90,9 @@ def settle(objects: list[tuple[str, str, trimesh.Trimesh]], priorities: dict[str
         solid = to_manifold(mesh, name)
         solids[i] = solid if taken is None else solid - taken
         taken = solid if taken is None else taken + solid
-    lo, hi = np.asarray(box_mm, dtype=np.float64)
-    box = manifold3d.Manifold.cube(tuple(hi - lo)).translate(tuple(lo))
     shared = sum((solids[i] ^ solids[j]).volume() for k, i in enumerate(order) for j in order[k + 1:])
     settled = [(name, family, from_manifold(solids[i])) for i, (name, family, _) in enumerate(objects)]
-    return settled, from_manifold(box - taken), float(shared)
+    return settled, from_manifold(box_minus(box_mm, [taken])), float(shared)
 
 
 def write_parts(parts: list[Part], directory, fmt: str) -> dict[str, str]:
