@@ -305,7 +305,7 @@ class Sample:
 
     def parts(self, materials=None, *, per: str = "yarn", resolve: str = "priority", measure: bool = True,
               progress: bool = False) -> tuple[list[Part], dict]:
-        """The sample's objects (:class:`~xrayraster.weave.export.Part`) and how much its yarns overlap.
+        """The sample's objects (:class:`~xrayraster.weave.export.Part`), and facts about its yarns.
 
         ``materials`` as for :meth:`scene`. ``per="yarn"``: the matrix and one part per yarn;
         ``"family"``: the matrix, the wefts, the warps (each family one mesh, the union of its yarns)
@@ -313,9 +313,10 @@ class Sample:
         makes every mesh disjoint, higher priority keeping shared space (per yarn
         :func:`~xrayraster.weave.resolve.resolve_boolean`, per family
         :func:`~xrayraster.weave.export.settle`), the matrix the box minus the yarns; ``"priority"``
-        leaves the overlaps to the scene's priorities. The dict gives the interpenetration (mm³)
-        between yarns ``before`` and ``after`` resolving (``after`` None for ``"priority"``); with
-        ``measure=False`` it is empty unless the per-yarn boolean measured it anyway (a scan needs none).
+        leaves the overlaps to the scene's priorities. The dict gives ``yarns``, the yarns in the
+        sample by kind (clipped remnants left out), and ``interpenetration_mm3``: the volume between
+        yarns ``before`` and ``after`` resolving (``after`` None for ``"priority"``); with
+        ``measure=False`` that is empty unless the per-yarn boolean measured it anyway (a scan needs none).
         """
         check_choice(per, EXPORT_PER, "per", WeaveError)
         check_choice(resolve, WEAVE_RESOLVE, "resolve", WeaveError)
@@ -346,7 +347,9 @@ class Sample:
             material, label = tracers.get(name, (family_materials[family], None))
             parts.append(Part(name, family, material, LABELS[family] if label is None else label,
                               PRIORITIES[family], mesh))
-        return parts, overlap
+        kinds = [yarn.kind for yarn, _ in pieces]
+        yarns = {kind: kinds.count(kind) for kind in ("weft", "binder", "stuffer")}
+        return parts, {"yarns": {**yarns, "total": len(kinds)}, "interpenetration_mm3": overlap}
 
     def scene(self, materials=None, *, resolve: str = "priority") -> Scene:
         """An ``xr.Scene``: the matrix box (label 1, priority 0), wefts (2, 1) and warps (3, 2).
@@ -374,14 +377,12 @@ class Sample:
         interpenetration before and after resolving.
         """
         start = time.perf_counter()
-        parts, overlap = self.parts(materials, per=per, resolve=resolve, progress=progress)
+        parts, facts = self.parts(materials, per=per, resolve=resolve, progress=progress)
         _stage(progress, f"writing {len(parts)} mesh files and measuring the families' volumes")
         files = write_parts(parts, directory, fmt)
         volumes = occupied_volumes(parts, PRIORITIES)
         lo, hi = self.box
         box_volume = float(np.prod(hi - lo))
-        kinds = [yarn.kind for yarn in self.yarns()]
-        yarns = {kind: kinds.count(kind) for kind in ("weft", "binder", "stuffer")}
         family_materials = self._materials(materials)[0]
         keys = [p.family if p.material == family_materials[p.family] else p.name for p in parts]  # tracers: own
         report = {
@@ -390,7 +391,7 @@ class Sample:
             "points_per_section": self.points_per_section, "samples_per_mm": self.samples_per_mm,
             "seed": self.seed, "distortion": self.distortion.to_dict(),
             "resolve": resolve, "per": per, "format": fmt,
-            "yarns": {**yarns, "total": sum(yarns.values())},
+            "yarns": facts["yarns"],
             "triangles": int(sum(len(p.mesh.faces) for p in parts)),
             "parts": [{"name": p.name, "file": files[p.name], "family": p.family, "label": p.label,
                        "priority": p.priority, "material": key} for p, key in zip(parts, keys)],
@@ -399,7 +400,7 @@ class Sample:
             "mesh_bounds_mm": mesh_bounds(parts),
             "volume_mm3": {"box": box_volume, **volumes},
             "volume_fraction": {f: v / box_volume for f, v in volumes.items()},
-            "interpenetration_mm3": overlap,
+            "interpenetration_mm3": facts["interpenetration_mm3"],
             "seconds": round(time.perf_counter() - start, 3),
         }
         write_report(report, directory)
