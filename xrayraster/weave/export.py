@@ -29,7 +29,7 @@ from ..core.errors import WeaveError
 from ..core.files import atomic_write
 from ..core.provenance import package_version
 from ..scene.materials import Material
-from .manifold_mesh import box_minus, from_manifold, to_manifold, union
+from .manifold_mesh import box_minus, from_manifold, to_manifold, union, without_slivers
 
 __all__ = [
     "REPORT_NAME", "Part", "is_export", "material_entry", "merge_meshes", "mesh_bounds", "occupied_volumes",
@@ -92,7 +92,7 @@ def settle(objects: list[tuple[str, str, trimesh.Trimesh]], priorities: dict[str
         taken = solid if taken is None else taken + solid
     shared = sum((solids[i] ^ solids[j]).volume() for k, i in enumerate(order) for j in order[k + 1:])
     settled = [(name, family, from_manifold(solids[i])) for i, (name, family, _) in enumerate(objects)]
-    return settled, from_manifold(box_minus(box_mm, [taken])), float(shared)
+    return settled, from_manifold(without_slivers(box_minus(box_mm, [taken]))), float(shared)
 
 
 def write_parts(parts: list[Part], directory, fmt: str) -> dict[str, str]:

@@ -8,7 +8,7 @@ import trimesh
 
 from ..core.errors import WeaveError
 
-__all__ = ["SLIVER_TOLERANCE_MM", "box_minus", "from_manifold", "to_manifold", "union"]
+__all__ = ["SLIVER_TOLERANCE_MM", "box_minus", "from_manifold", "to_manifold", "union", "without_slivers"]
 
 #: Subtracting yarns from the sample box leaves a few sliver triangles (heights of ~1e-8 mm, which
 #: trimesh and finite-element meshers count as degenerate) where the yarns' cut faces lie in the
@@ -42,7 +42,12 @@ def union(solids: list[manifold3d.Manifold]) -> manifold3d.Manifold:
 
 
 def box_minus(box_mm, solids: list[manifold3d.Manifold]) -> manifold3d.Manifold:
-    """The matrix: the ``(2, 3)`` min/max box (mm) minus ``solids``, slivers removed (:data:`SLIVER_TOLERANCE_MM`)."""
+    """The ``(2, 3)`` min/max box (mm) minus ``solids``: the matrix, before :func:`without_slivers`."""
     lo, hi = np.asarray(box_mm, dtype=np.float64)
     box = manifold3d.Manifold.cube(tuple(hi - lo)).translate(tuple(lo))
-    return manifold3d.Manifold.batch_boolean([box, *solids], manifold3d.OpType.Subtract).simplify(SLIVER_TOLERANCE_MM)
+    return manifold3d.Manifold.batch_boolean([box, *solids], manifold3d.OpType.Subtract)
+
+
+def without_slivers(solid: manifold3d.Manifold) -> manifold3d.Manifold:
+    """``solid`` simplified to :data:`SLIVER_TOLERANCE_MM`: the box-minus-yarns slivers removed."""
+    return solid.simplify(SLIVER_TOLERANCE_MM)

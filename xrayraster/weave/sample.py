@@ -325,10 +325,10 @@ class Sample:
         matrix = self.matrix_mesh()
         if per == "yarn" and resolve == "boolean":
             _stage(progress, "resolving every yarn pair (boolean)")
-            resolved = resolve_boolean(pieces, self.box)
+            resolved = resolve_boolean(pieces, self.box, measure_after=False)  # excess is exact and cheap
             matrix = resolved.matrix
             objects = [(yarn.name, yarn.family, mesh) for yarn, mesh in resolved.pieces]
-            overlap = {"before": resolved.before.volume, "after": resolved.after.volume,
+            overlap = {"before": resolved.before.volume, "after": max(resolved.excess, 0.0),
                        "dropped_yarns": list(resolved.dropped)}
         else:
             _stage(progress and measure, "measuring the interpenetration of the yarns")
