@@ -41,6 +41,7 @@ from .gl.voxelize import LabelVolume, voxelize
 from .physics.detector import Detector
 from .physics.radiograph import Radiograph
 from .physics.spectrum import Spectrum
+from .pipeline import ScanResult, scan
 from .recon.fdk import Volume, fdk
 from .recon.opencl import CLContext
 from .scene.materials import Material
@@ -71,6 +72,7 @@ __all__ = [
     "ReconstructionError",
     "RenderError",
     "Renderer",
+    "ScanResult",
     "Scene",
     "SceneError",
     "SceneObject",
@@ -86,6 +88,7 @@ __all__ = [
     "fdk",
     "full_circle",
     "load_mesh",
+    "scan",
     "voxelize",
     "weave",
 ]

@@ -1,0 +1,165 @@
+"""``xr.scan``: a scan file's sample → every projection → FDK → labels on the same grid.
+
+The stages run in one process, the projections held in memory (streaming them into the
+filtering stage in batches is a later step). The result carries the volume (cm⁻¹), the labels
+and the metadata that ``scan.json`` stores; :meth:`ScanResult.save` writes them (docs/scan.md).
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+import json
+import resource
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..core.files import atomic_write
+from ..core.tiff import quicklook_factor
+from ..gl.voxelize import LabelVolume, voxelize
+from ..physics.detector import Detector
+from ..recon.fdk import Volume, fdk
+from ..recon.opencl import CLContext
+from ..simulate.renderer import Renderer
+from .scan_file import ScanFile, load_scan_file
+
+__all__ = ["ScanResult", "is_scan_output", "scan"]
+
+GENERATOR = "xrayraster scan"
+VOLUME_NAME, LABELS_NAME, METADATA_NAME, SLICES_NAME = "volume.tif", "labels.tif", "scan.json", "slices.png"
+_LIBRARIES = ("numpy", "moderngl", "pyopencl", "manifold3d", "xraylib", "spekpy")
+# Label colours (RGB) for the slice picture, label k taking entry (k - 1) mod len: matrix, weft, warp first.
+_PALETTE = np.array([(70, 110, 220), (235, 170, 40), (200, 60, 60), (70, 190, 90), (170, 90, 200), (60, 190, 200)],
+                    dtype=np.float64)
+_OVERLAY_ALPHA = 0.35  # the label colour's share in the overlay: enough to read classes, the grey still shows
+_GAP_PX = 4  # black space between the pictures of slices.png
+
+
+@dataclass(frozen=True)
+class ScanResult:
+    """``volume`` (:class:`~xrayraster.Volume`, cm⁻¹), ``labels`` (:class:`~xrayraster.LabelVolume`) on
+    the same grid, and ``metadata``: every parameter, the seed, library versions, device names,
+    per-stage wall times (s) and the peak resident memory (MiB), as ``scan.json`` stores them."""
+
+    volume: Volume
+    labels: LabelVolume
+    metadata: dict
+
+    def save(self, directory) -> Path:
+        """Write ``volume.tif`` (float32, cm⁻¹), ``labels.tif``, ``scan.json`` and ``slices.png`` into
+        ``directory`` (made if missing; each file written atomically). Returns ``directory``."""
+        directory = Path(directory)
+        directory.mkdir(parents=True, exist_ok=True)
+        self.volume.save(directory / VOLUME_NAME, quicklook=False)
+        self.labels.save(directory / LABELS_NAME, quicklook=False)
+        write_slices(directory / SLICES_NAME, self.volume.data, self.labels.data)
+        text = json.dumps(self.metadata, indent=2) + "\n"
+        atomic_write(directory / METADATA_NAME, lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))
+        return directory
+
+
+def is_scan_output(directory) -> bool:
+    """Whether ``directory`` holds an earlier ``xrayraster scan`` output (its scan.json says so)."""
+    try:
+        return json.loads((Path(directory) / METADATA_NAME).read_text()).get("generator") == GENERATOR
+    except (OSError, ValueError, AttributeError):
+        return False
+
+
+def scan(scan_file_or_path, *, progress=False) -> ScanResult:
+    """Run the scan of a :class:`~xrayraster.pipeline.ScanFile` (or a scan file's path, loaded and
+    checked first): sample → ``Renderer.project_all`` (line integrals, noise as the options say) →
+    ``xr.fdk`` on the file's grid → ``xr.voxelize`` on the same grid. ``progress``: a bar with ETA
+    for the projections (True), a callable ``progress(done, total)``, or nothing (False)."""
+    loaded = scan_file_or_path if isinstance(scan_file_or_path, ScanFile) else load_scan_file(scan_file_or_path)
+    options = loaded.options
+    seconds: dict[str, float] = {}
+    with _timed(seconds, "sample"):
+        scene = loaded.sample_scene()
+    with Renderer(loaded.geometry) as renderer, CLContext() as cl:
+        with _timed(seconds, "projections"):
+            projections = renderer.project_all(scene, loaded.spectrum, detector=loaded.detector, noise=options.noise,
+                                               seed=options.seed, progress=progress)
+        with _timed(seconds, "fdk"):
+            volume = fdk(projections, volume=loaded.volume, filter=options.filter, context=cl)
+        del projections  # the labels stage needs none of it: free it before the peak
+        with _timed(seconds, "labels"):
+            labels = voxelize(scene, loaded.volume, context=renderer.gl)
+        devices = {"gl_renderer": renderer.gl.renderer, "opencl_device": str(cl.info)}
+    from .. import __version__  # here: the package's __init__ imports this module before it sets the version
+
+    metadata = {
+        "generator": GENERATOR,
+        "xrayraster_version": __version__,
+        "scan_file": str(loaded.path),
+        "geometry": loaded.geometry.to_dict(),
+        "volume": loaded.volume.to_dict(),
+        "source": loaded.spectrum.description,
+        "detector": repr(loaded.detector or Detector()),
+        "options": options.to_dict(),
+        "seed": options.seed,
+        "sample": loaded.weave_report or _objects_report(scene),
+        "triangles": scene.num_triangles,
+        "units": {"volume": volume.unit, "lengths": "mm", "seconds": "s", "peak_rss": "MiB"},
+        "libraries": {name: _version(name) for name in _LIBRARIES},
+        "devices": devices,
+        "seconds": {**{k: round(v, 3) for k, v in seconds.items()}, "total": round(sum(seconds.values()), 3)},
+        # ru_maxrss is in KiB on Linux: the process's peak, which the scan's stages set.
+        "peak_rss_mib": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
+    }
+    return ScanResult(volume, labels, metadata)
+
+
+@contextmanager
+def _timed(seconds: dict, stage: str):
+    start = time.perf_counter()
+    yield
+    seconds[stage] = time.perf_counter() - start
+
+
+def _version(name: str) -> str | None:
+    try:
+        return importlib.metadata.version(name)
+    except importlib.metadata.PackageNotFoundError:
+        return None
+
+
+def _objects_report(scene) -> dict:
+    return {"objects": [{"name": o.name, "label": o.label, "priority": o.priority, "material": repr(o.material)}
+                        for o in scene.objects], "box_mm": scene.bounds.tolist()}
+
+
+def write_slices(path, volume: np.ndarray, labels: np.ndarray) -> Path:
+    """A PNG of the central slices across z, y and x (one row each): the reconstruction (grey, 0 to
+    its 99.9th percentile), the labels (colours) and the two overlaid. +z (or +y) up, as in
+    ``write_quicklook``; small grids enlarged by the same nearest-neighbour factor."""
+    from PIL import Image
+
+    top = float(np.percentile(volume, 99.9)) or 1.0
+    grey = np.clip(volume / top, 0.0, 1.0)
+    rows = []
+    for axis in range(3):
+        middle = volume.shape[axis] // 2
+        g = np.take(grey, middle, axis=axis)[::-1]
+        lab = np.take(labels, middle, axis=axis)[::-1].astype(np.int64)
+        colour = np.where((lab > 0)[..., None], _PALETTE[(lab - 1) % len(_PALETTE)], 0.0)
+        shaded = np.repeat(255 * g[..., None], 3, axis=-1)
+        overlay = np.where((lab > 0)[..., None], (1 - _OVERLAY_ALPHA) * shaded + _OVERLAY_ALPHA * colour, shaded)
+        rows.append([shaded, colour, overlay])
+    factor = quicklook_factor(volume.shape)
+    height = [max(p.shape[0] for p in row) * factor for row in rows]
+    width = max(sum(p.shape[1] * factor + _GAP_PX for p in row) for row in rows)
+    canvas = np.zeros((sum(height) + _GAP_PX * len(rows), width, 3), np.uint8)
+    y = 0
+    for row, h in zip(rows, height):
+        x = 0
+        for picture in row:
+            big = np.repeat(np.repeat(np.round(picture).astype(np.uint8), factor, axis=0), factor, axis=1)
+            canvas[y:y + big.shape[0], x:x + big.shape[1]] = big
+            x += big.shape[1] + _GAP_PX
+        y += h + _GAP_PX
+    image = Image.fromarray(canvas)
+    return atomic_write(Path(path), lambda tmp: image.save(tmp, format="PNG"))
