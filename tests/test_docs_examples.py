@@ -127,15 +127,18 @@ def test_toml_scene_renders_every_material(doc, line, text, expect, tmp_path, gl
 
 
 def test_bundled_examples_are_quoted_verbatim_in_the_format_reference():
-    """Scene files in docs/scene-format.md (loaded there as toml blocks), weave files in docs/weave.md."""
+    """Scene files in docs/scene-format.md (loaded there as toml blocks); weave files in docs/weave.md
+    and woven scan files (a [weave] and a [source]) in docs/scan.md, as text blocks."""
     quoted = {text.strip() for doc, _, text, _ in TOML if doc.name == "scene-format.md"}
-    weave_doc = (ROOT / "docs" / "weave.md").read_text()
     examples = sorted((ROOT / "examples").glob("*.toml"))
     assert examples
     for example in examples:
         text = example.read_text().strip()
-        if "weave" in tomllib.loads(text):
-            assert f"```text\n{text}\n```" in weave_doc, f"{example.name} differs from its copy in docs/weave.md"
+        data = tomllib.loads(text)
+        if "weave" in data:
+            doc = "scan.md" if "source" in data else "weave.md"
+            assert f"```text\n{text}\n```" in (ROOT / "docs" / doc).read_text(), \
+                f"{example.name} differs from its copy in docs/{doc}"
         else:
             assert text in quoted, f"{example.name} differs from its copy in docs/scene-format.md"
 
