@@ -259,3 +259,35 @@ def test_objects_default_grid_covers_their_bounds_at_the_magnified_pitch(gl, cl,
     mu = 10 * xr.Material.named("water").attenuation_per_mm(30.0)  # cm⁻¹, monochromatic: no hardening
     core = ndimage.binary_erosion(inside, iterations=2)
     assert abs(result.volume.data[core].mean() / mu - 1) < 0.05
+
+
+def test_mesh_resolution_follows_the_grid(tmp_path):
+    """Knobs left open in [weave.sample] are chosen for the grid: the predicted error (tessellation
+    theory, tested against measured meshes in test_weave_tessellation.py) stays within the
+    tolerance, a coarser grid gets a coarser mesh, and knobs the file gives are kept."""
+    from xrayraster.pipeline.scan_file import load_scan_file
+    from xrayraster.weave.tessellation import binder_bend_radius_mm, path_error_mm, section_error_mm
+
+    text = example_text()
+    fixed = load_scan_file(EXAMPLE)
+    assert (fixed.weave.sample.points_per_section, fixed.weave.sample.samples_per_mm) == (12, 2.0)
+    assert fixed.mesh_resolution["chosen_from_the_grid"] == []
+    chosen = {}
+    for voxel in (0.05, 0.2):
+        path = tmp_path / f"open_{voxel}.toml"
+        open_text = "\n".join(line if not line.startswith("voxel_size") else f"voxel_size = {voxel}"
+                              for line in text.splitlines()
+                              if not line.startswith(("points_per_section", "samples_per_mm")))
+        assert f"voxel_size = {voxel}" in open_text
+        path.write_text(open_text)
+        loaded = load_scan_file(path)
+        record, sample = loaded.mesh_resolution, loaded.weave.sample
+        assert record["chosen_from_the_grid"] == ["points_per_section", "samples_per_mm"]
+        assert record["tolerance_mm"] == pytest.approx(0.05 * voxel)
+        cell = sample.cell
+        error = max(section_error_mm(cell.weft_section, cell.weft_width, cell.weft_height, sample.points_per_section),
+                    section_error_mm(cell.warp_section, cell.warp_width, cell.warp_height, sample.points_per_section))
+        error += path_error_mm(binder_bend_radius_mm(cell), sample.samples_per_mm, cell.warp_height / 2)
+        assert error <= record["tolerance_mm"] * (1 + 1e-9)
+        chosen[voxel] = (sample.points_per_section, sample.samples_per_mm)
+    assert chosen[0.2][0] < chosen[0.05][0] and chosen[0.2][1] < chosen[0.05][1]

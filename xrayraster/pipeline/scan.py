@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.files import atomic_write
+from ..core.provenance import package_version
 from ..core.tiff import quicklook_factor
 from ..gl.voxelize import LabelVolume, voxelize
 from ..physics.detector import Detector
@@ -89,11 +90,10 @@ def scan(scan_file_or_path, *, progress=False) -> ScanResult:
         with _timed(seconds, "labels"):
             labels = voxelize(scene, loaded.volume, context=renderer.gl)
         devices = {"gl_renderer": renderer.gl.renderer, "opencl_device": str(cl.info)}
-    from .. import __version__  # here: the package's __init__ imports this module before it sets the version
 
     metadata = {
         "generator": GENERATOR,
-        "xrayraster_version": __version__,
+        "xrayraster_version": package_version(),
         "scan_file": str(loaded.path),
         "geometry": loaded.geometry.to_dict(),
         "volume": loaded.volume.to_dict(),
@@ -102,6 +102,7 @@ def scan(scan_file_or_path, *, progress=False) -> ScanResult:
         "options": options.to_dict(),
         "seed": options.seed,
         "sample": loaded.weave_report or _objects_report(scene),
+        "mesh_resolution": loaded.mesh_resolution,
         "triangles": scene.num_triangles,
         "units": {"volume": volume.unit, "lengths": "mm", "seconds": "s", "peak_rss": "MiB"},
         "libraries": {name: _version(name) for name in _LIBRARIES},

@@ -31,8 +31,9 @@ from ..physics.detector import Detector
 from ..physics.spectrum import Spectrum
 from ..scene.materials import Material
 from ..scene.scene import Scene
+from ..weave.tessellation import resolution_for
 
-__all__ = ["ScanFile", "ScanOptions", "load_scan_file"]
+__all__ = ["ScanFile", "ScanOptions", "load_scan_file", "mesh_resolution_for"]
 
 _TABLES = {"geometry", "objects", "weave", "materials", "source", "detector", "volume", "scan"}
 
@@ -40,11 +41,14 @@ _TABLES = {"geometry", "objects", "weave", "materials", "source", "detector", "v
 @dataclass(frozen=True)
 class ScanOptions:
     """The ``[scan]`` table: ``seed`` (noise seed, an integer >= 0), ``noise`` (photon noise on),
-    ``filter`` (the FDK ramp-filter window, one of :data:`~xrayraster.core.choices.FILTERS`)."""
+    ``filter`` (the FDK ramp-filter window, one of :data:`~xrayraster.core.choices.FILTERS`),
+    ``mesh_tolerance_voxels`` (a weave's largest predicted path-length error per yarn boundary, in
+    voxels of the grid, where ``[weave.sample]`` leaves the mesh resolution open; 0.05 = 1/20)."""
 
     seed: int = 0
     noise: bool = True
     filter: str = "ram-lak"
+    mesh_tolerance_voxels: float = 0.05
 
     @classmethod
     def from_dict(cls, d: dict, where: str) -> "ScanOptions":
@@ -52,6 +56,9 @@ class ScanOptions:
         options = {}
         if "seed" in d:
             options["seed"] = fields.integer(d["seed"], "seed", where, 0)
+        if "mesh_tolerance_voxels" in d:
+            options["mesh_tolerance_voxels"] = fields.number(d["mesh_tolerance_voxels"], "mesh_tolerance_voxels",
+                                                             where, positive=True)
         if "noise" in d:
             if not isinstance(d["noise"], bool):
                 raise ConfigError(f"{where}: noise must be true or false, got {d['noise']!r}")
@@ -81,6 +88,7 @@ class ScanFile:
     spectrum: Spectrum
     detector: Detector | None
     options: ScanOptions
+    mesh_resolution: dict | None = None  # a weave's knobs, and whether the grid chose them (mesh_resolution_for)
 
     def sample_scene(self, progress: bool = False) -> Scene:
         """The scene to scan: the objects, or the weave meshed and moved so its box is centred on the axis."""
@@ -142,8 +150,29 @@ def load_scan_file(path) -> ScanFile:
     if volume is None:
         centre = (box[0] + box[1]) / 2
         volume = dataclasses.replace(sample_grid(box, geometry), offset=tuple(centre[::-1].tolist()))
+    resolution = None
+    if weave is not None:
+        given = {k: k in fields.table(data["weave"].get("sample", {}), "weave.sample", f"{path} [weave]")
+                 for k in ("points_per_section", "samples_per_mm")}
+        weave, resolution = mesh_resolution_for(weave, volume, options.mesh_tolerance_voxels, given)
     return ScanFile(path, scene, weave, np.asarray(box, dtype=np.float64), geometry, volume, spectrum, detector,
-                    options)
+                    options, resolution)
+
+
+def mesh_resolution_for(weave: WeaveFile, volume: VolumeGeometry, tolerance_voxels: float,
+                        given: dict[str, bool]) -> tuple[WeaveFile, dict]:
+    """The weave meshed no finer than the grid needs: the knobs ``given`` as False are replaced by
+    :func:`~xrayraster.weave.tessellation.resolution_for` at ``tolerance_voxels`` of the smallest voxel
+    side (a 128³ scan does not pay for the triangles a 512³ one needs). Returns the weave and a record
+    of the choice (knobs, tolerance in mm, which were chosen) for the scan's metadata."""
+    sample = weave.sample
+    tolerance = tolerance_voxels * float(min(volume.voxel_size))
+    k, rate = resolution_for(sample.cell, tolerance)
+    knobs = {"points_per_section": sample.points_per_section if given["points_per_section"] else k,
+             "samples_per_mm": sample.samples_per_mm if given["samples_per_mm"] else rate}
+    record = {**knobs, "tolerance_mm": tolerance, "tolerance_voxels": tolerance_voxels,
+              "chosen_from_the_grid": sorted(name for name, fixed in given.items() if not fixed)}
+    return dataclasses.replace(weave, sample=dataclasses.replace(sample, **knobs)), record
 
 
 def _objects(objects, path: Path, materials: dict | None) -> tuple[Scene, dict]:
