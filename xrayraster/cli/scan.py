@@ -18,6 +18,8 @@ def add_parser(subparsers) -> None:
     parser.add_argument("scan", type=Path, help="scan file (docs/scan.md): a scene file whose sample may be [weave]")
     parser.add_argument("-o", "--out", dest="out", metavar="DIR", type=Path, required=True,
                         help="output directory (replaced only if it holds an earlier xrayraster scan output)")
+    parser.add_argument("--save-projections", action="store_true",
+                        help="also write the projections (line integrals) as DIR/projections.tif")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument("-v", "--verbose", action="store_true")
     parser.set_defaults(run=run)
@@ -26,7 +28,7 @@ def add_parser(subparsers) -> None:
 def run(args) -> int:
     loaded = load_scan_file(args.scan)
     with atomic_directory(args.out, replaceable=is_scan_output) as tmp:
-        result = scan(loaded, progress=not args.quiet)
+        result = scan(loaded, progress=not args.quiet, keep_projections=args.save_projections)
         result.save(tmp)
     meta = result.metadata
     stages = ", ".join(f"{stage} {s:.2f}" for stage, s in meta["seconds"].items())

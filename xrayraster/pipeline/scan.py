@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.files import atomic_write
+from ..core.projections import Projections
 from ..core.provenance import package_version
 from ..core.tiff import quicklook_factor
 from ..gl.voxelize import LabelVolume, voxelize
@@ -31,6 +32,7 @@ __all__ = ["ScanResult", "is_scan_output", "scan"]
 
 GENERATOR = "xrayraster scan"
 VOLUME_NAME, LABELS_NAME, METADATA_NAME, SLICES_NAME = "volume.tif", "labels.tif", "scan.json", "slices.png"
+PROJECTIONS_NAME = "projections.tif"
 _LIBRARIES = ("numpy", "moderngl", "pyopencl", "manifold3d", "xraylib", "spekpy")
 # Label colours (RGB) for the slice picture, label k taking entry (k - 1) mod len: matrix, weft, warp first.
 _PALETTE = np.array([(70, 110, 220), (235, 170, 40), (200, 60, 60), (70, 190, 90), (170, 90, 200), (60, 190, 200)],
@@ -48,13 +50,17 @@ class ScanResult:
     volume: Volume
     labels: LabelVolume
     metadata: dict
+    projections: Projections | None = None  # kept only when asked (scan(..., keep_projections=True))
 
     def save(self, directory) -> Path:
         """Write ``volume.tif`` (float32, cm⁻¹), ``labels.tif``, ``scan.json`` and ``slices.png`` into
-        ``directory`` (made if missing; each file written atomically). Returns ``directory``."""
+        ``directory`` (made if missing; each file written atomically), and ``projections.tif`` (line
+        integrals, with their quick-look) when the result holds them. Returns ``directory``."""
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
         self.volume.save(directory / VOLUME_NAME, quicklook=False)
+        if self.projections is not None:
+            self.projections.save(directory / PROJECTIONS_NAME)
         self.labels.save(directory / LABELS_NAME, quicklook=False)
         write_slices(directory / SLICES_NAME, self.volume.data, self.labels.data)
         text = json.dumps(self.metadata, indent=2) + "\n"
@@ -70,11 +76,12 @@ def is_scan_output(directory) -> bool:
         return False
 
 
-def scan(scan_file_or_path, *, progress=False) -> ScanResult:
+def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False) -> ScanResult:
     """Run the scan of a :class:`~xrayraster.pipeline.ScanFile` (or a scan file's path, loaded and
     checked first): sample → ``Renderer.project_all`` (line integrals, noise as the options say) →
     ``xr.fdk`` on the file's grid → ``xr.voxelize`` on the same grid. ``progress``: a bar with ETA
-    for the projections (True), a callable ``progress(done, total)``, or nothing (False)."""
+    for the projections (True), a callable ``progress(done, total)``, or nothing (False).
+    ``keep_projections``: return the projections too (they are otherwise freed after the FDK)."""
     loaded = scan_file_or_path if isinstance(scan_file_or_path, ScanFile) else load_scan_file(scan_file_or_path)
     options = loaded.options
     seconds: dict[str, float] = {}
@@ -86,7 +93,8 @@ def scan(scan_file_or_path, *, progress=False) -> ScanResult:
                                                seed=options.seed, progress=progress)
         with _timed(seconds, "fdk"):
             volume = fdk(projections, volume=loaded.volume, filter=options.filter, context=cl)
-        del projections  # the labels stage needs none of it: free it before the peak
+        if not keep_projections:
+            del projections  # the labels stage needs none of it: free it before the peak
         with _timed(seconds, "labels"):
             labels = voxelize(scene, loaded.volume, context=renderer.gl)
         devices = {"gl_renderer": renderer.gl.renderer, "opencl_device": str(cl.info)}
@@ -111,7 +119,7 @@ def scan(scan_file_or_path, *, progress=False) -> ScanResult:
         # ru_maxrss is in KiB on Linux: the process's peak, which the scan's stages set.
         "peak_rss_mib": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
     }
-    return ScanResult(volume, labels, metadata)
+    return ScanResult(volume, labels, metadata, projections if keep_projections else None)
 
 
 @contextmanager
@@ -134,13 +142,15 @@ def _objects_report(scene) -> dict:
 
 
 def write_slices(path, volume: np.ndarray, labels: np.ndarray) -> Path:
-    """A PNG of the central slices across z, y and x (one row each): the reconstruction (grey, 0 to
-    its 99.9th percentile), the labels (colours) and the two overlaid. +z (or +y) up, as in
-    ``write_quicklook``; small grids enlarged by the same nearest-neighbour factor."""
+    """A PNG of the central slices across z, y and x (one row each): the reconstruction (grey), the
+    labels (colours) and the two overlaid. The grey window spans the 1st to the 99.5th percentile of
+    the labelled voxels (the sample), so matrix and yarns differ visibly and air is black. +z (or +y)
+    up, as in ``write_quicklook``; small grids enlarged by the same nearest-neighbour factor."""
     from PIL import Image
 
-    top = float(np.percentile(volume, 99.9)) or 1.0
-    grey = np.clip(volume / top, 0.0, 1.0)
+    inside = volume[labels > 0] if np.any(labels > 0) else volume.ravel()
+    low, top = (float(v) for v in np.percentile(inside, [1.0, 99.5]))
+    grey = np.clip((volume - low) / ((top - low) or 1.0), 0.0, 1.0)
     rows = []
     for axis in range(3):
         middle = volume.shape[axis] // 2
