@@ -74,7 +74,7 @@ from scripts.common import say
 CELLS = (1, 2, 4, 8)  # cells per side
 RESOLUTIONS = {"default": (24, 4.0), "coarse": (12, 2.0)}  # name: (points_per_section, samples_per_mm)
 KINDS = ("scan", "interpenetration", "boolean", "texgen")
-TARGETS_S = {"scan": 5.0, "boolean": 30.0}  # issue 13: a 4 × 4-cell distorted sample
+TARGETS_S = {"scan": 5.0, "boolean": 30.0}  # the targets for a 4 × 4-cell distorted sample
 TARGET_CELLS = 4
 REPEATS = 3
 REPEAT_BUDGET_S = {"scan": 12.0, "boolean": 5.0, "texgen": 5.0}  # no call starts after this much time

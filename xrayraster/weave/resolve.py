@@ -8,7 +8,7 @@ need disjoint meshes instead; :func:`resolve_boolean` makes them with manifold3d
 The rule: a yarn's *rank* is its family's priority (:data:`~xrayraster.weave.sample.PRIORITIES`:
 warp over weft), then its position in the list of pieces (``Sample.meshes()`` order); the yarn of
 higher rank keeps shared space. So wefts lose what warps take from them (weft minus warp, as the
-reference paper of issue 13 does), and of two yarns of one family the later one keeps the overlap. This is the
+reference pipeline does), and of two yarns of one family the later one keeps the overlap. This is the
 scene's own overlap rule (higher priority wins; between equal priorities the one added later), so
 a scene of the resolved meshes renders and voxelizes as the priority-resolved one. The matrix is
 the box minus the yarns.
