@@ -12,6 +12,7 @@ import manifold3d
 import numpy as np
 import pytest
 
+from references.solids import is_manifold, solid
 from xrayraster.core.errors import ConfigError, WeaveError
 from xrayraster.weave import Distortion, Sample, UnitCell, read_textomos
 from xrayraster.weave.distort import layer_shift
@@ -37,10 +38,9 @@ def _stl_hashes(sample) -> dict:
 
 
 def _clip(mesh, box) -> manifold3d.Manifold:
-    solid = manifold3d.Manifold(manifold3d.Mesh64(vert_properties=np.array(mesh.vertices, order="C"),
-                                                  tri_verts=np.array(mesh.faces, np.uint64, order="C")))
-    assert solid.status() == manifold3d.Error.NoError
-    return solid ^ box
+    s = solid(mesh)
+    assert s.status() == manifold3d.Error.NoError
+    return s ^ box
 
 
 def _regular_node(cell, name: str) -> np.ndarray:
@@ -235,9 +235,7 @@ def test_distorted_meshes_are_closed_manifold_and_outward():
     lo, hi = sample.yarn_box
     for yarn, mesh in meshes:
         assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0, yarn.name
-        solid = manifold3d.Manifold(manifold3d.Mesh64(vert_properties=np.array(mesh.vertices, order="C"),
-                                                      tri_verts=np.array(mesh.faces, np.uint64, order="C")))
-        assert solid.status() == manifold3d.Error.NoError
+        assert is_manifold(mesh), yarn.name
         assert np.all(mesh.bounds[0] >= lo - 1e-9) and np.all(mesh.bounds[1] <= hi + 1e-9)
 
 

@@ -8,12 +8,12 @@ import hashlib
 import json
 from pathlib import Path
 
-import manifold3d
 import numpy as np
 import pytest
 import tifffile
 import trimesh
 
+from references.solids import is_manifold
 from xrayraster import cli
 from xrayraster.io.scene_file import load_scene_file
 from xrayraster.weave import Sample, UnitCell
@@ -54,13 +54,6 @@ density = 1.82
 """
 
 
-def _manifold_ok(mesh) -> bool:
-    solid = manifold3d.Manifold(manifold3d.Mesh64(
-        vert_properties=np.array(mesh.vertices, dtype=np.float64, order="C"),
-        tri_verts=np.array(mesh.faces, dtype=np.uint64, order="C")))
-    return solid.status() == manifold3d.Error.NoError and not solid.is_empty()
-
-
 @pytest.fixture(scope="module")
 def exported(tmp_path_factory):
     """``xrayraster weave weave.toml -o out`` (priority) and ``--resolve boolean --format ply``."""
@@ -84,7 +77,7 @@ def test_every_mesh_file_is_closed_manifold_and_outward(exported, name):
         mesh = trimesh.load(exported / name / part["file"], force="mesh", process=False)
         mesh.merge_vertices()  # STL stores triangle soup
         assert mesh.is_watertight and mesh.is_winding_consistent, part["name"]
-        assert mesh.volume > 0 and _manifold_ok(mesh), part["name"]
+        assert mesh.volume > 0 and is_manifold(mesh), part["name"]
         assert mesh.nondegenerate_faces().all(), part["name"]            # trimesh's own test (height > 1e-8)
 
 

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import xrayraster as xr
+from references.solids import is_manifold, solid
 from xrayraster.core.errors import WeaveError
 from xrayraster.weave import Sample, UnitCell
 from xrayraster.weave.sample import PLATEAU
@@ -19,13 +20,6 @@ COARSE = {"points_per_section": 12, "samples_per_mm": 2.0}
 def sample_2x1():
     s = Sample(UnitCell(), cells=(2, 1), **COARSE)
     return s, s.meshes()
-
-
-def _manifold_ok(mesh) -> bool:
-    solid = manifold3d.Manifold(manifold3d.Mesh64(
-        vert_properties=np.array(mesh.vertices, dtype=np.float64, order="C"),
-        tri_verts=np.array(mesh.faces, dtype=np.uint64, order="C")))
-    return solid.status() == manifold3d.Error.NoError and not solid.is_empty()
 
 
 @pytest.mark.parametrize("kwargs, field", [
@@ -78,7 +72,7 @@ def test_every_mesh_is_closed_oriented_and_manifold(sample_2x1):
     for mesh in [s.matrix_mesh()] + [m for _, m in meshes]:
         assert mesh.is_watertight and mesh.is_winding_consistent
         assert mesh.volume > 0
-        assert _manifold_ok(mesh)
+        assert is_manifold(mesh)
 
 
 def test_yarns_lie_inside_the_box(sample_2x1):
@@ -157,7 +151,5 @@ def test_no_binder_is_cut_by_the_top_or_bottom_face(sample_2x1):
         for yarn, mesh in binders:
             assert mesh.bounds[0, 2] > lo[2] + 0.05 and mesh.bounds[1, 2] < hi[2] - 0.05
             tube = yarn_mesh(yarn.nodes, yarn.outline, s.samples_per_mm, end_tangents=yarn.end_tangents)
-            solid = manifold3d.Manifold(manifold3d.Mesh64(
-                vert_properties=np.array(tube.vertices, dtype=np.float64, order="C"),
-                tri_verts=np.array(tube.faces, dtype=np.uint64, order="C"))) ^ tall
-            assert abs(mesh.volume - solid.volume()) <= 1e-9 * mesh.volume
+            clipped = solid(tube) ^ tall
+            assert abs(mesh.volume - clipped.volume()) <= 1e-9 * mesh.volume

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from references.solids import solid
 from xrayraster.core.errors import WeaveError, XrayrasterError
 from xrayraster.weave.sweep import (
     CubicSpline3,
@@ -48,10 +49,9 @@ def check_closed_mesh(vertices, faces):
     assert mesh.is_winding_consistent
     assert mesh.volume > 0
     assert np.all(mesh.area_faces > 0)
-    solid = manifold3d.Manifold(manifold3d.Mesh(vert_properties=np.asarray(vertices, np.float32),
-                                                tri_verts=np.asarray(faces, np.uint32)))
-    assert solid.status() == manifold3d.Error.NoError
-    assert solid.volume() == pytest.approx(mesh.volume, rel=1e-5)  # float32 in manifold3d
+    s = solid(mesh)
+    assert s.status() == manifold3d.Error.NoError
+    assert s.volume() == pytest.approx(mesh.volume, rel=1e-9)
     return mesh
 
 
@@ -416,9 +416,7 @@ def test_within_trims_the_tube_outside_the_box_to_the_same_clipped_solid():
     clip = manifold3d.Manifold.cube((6.0, 10.0, 10.0)).translate((2.0, -5.0, -5.0))
 
     def clipped(mesh):
-        solid = manifold3d.Manifold(manifold3d.Mesh64(vert_properties=np.array(mesh.vertices, order="C"),
-                                                      tri_verts=np.array(mesh.faces, np.uint64, order="C")))
-        return (solid ^ clip).volume()
+        return (solid(mesh) ^ clip).volume()
 
     full = yarn_mesh(nodes, outline, 8.0)
     trimmed = yarn_mesh(nodes, outline, 8.0, within=box)
