@@ -107,6 +107,11 @@ def atomic_write(path, write) -> Path:
     return path
 
 
+
+def atomic_write_text(path, text: str) -> Path:
+    """Write ``text`` (UTF-8) to ``path`` with :func:`atomic_write`."""
+    return atomic_write(path, lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))
+
 @contextmanager
 def atomic_directory(path, *, replaceable):
     """Build a directory of outputs under a temporary name beside ``path``, then move it into place.

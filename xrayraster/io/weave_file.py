@@ -25,7 +25,7 @@ import tomli_w
 
 from ..core import fields
 from ..core.errors import ConfigError, WeaveError
-from ..core.files import atomic_write
+from ..core.files import atomic_write_text
 from ..core.geometry import ConeBeamGeometry
 from ..core.volume import VolumeGeometry
 from ..scene.material_library import library_key
@@ -177,10 +177,10 @@ def write_scene_file(path, report: dict, geometry: ConeBeamGeometry) -> Path:
     header = (f"# The scene of a woven sample exported by xrayraster weave ({report['resolve']} resolve).\n"
               "# Render it: xrayraster render scene.toml -o radiograph.tif; edit [geometry] and [source] freely.\n")
     text = header + tomli_w.dumps(scene)
-    return atomic_write(Path(path), lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))
+    return atomic_write_text(Path(path), text)
 
 
 def write_scan_file(path, volume: VolumeGeometry) -> Path:
     """A scan file holding only the voxel grid (docs/reconstruction.md); written atomically."""
     text = json.dumps({"volume": volume.to_dict()}, indent=2) + "\n"
-    return atomic_write(Path(path), lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))
+    return atomic_write_text(Path(path), text)

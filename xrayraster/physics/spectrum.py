@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import SpectrumError
-from ..core.files import atomic_write
+from ..core.files import atomic_write_text
 
 __all__ = ["REFERENCE_DISTANCE_MM", "SPEKPY_ANODES", "Spectrum", "SpectrumError"]
 
@@ -183,7 +183,7 @@ class Spectrum:
         lines += [f"# {line}" for line in self.description.splitlines()]
         lines += [f"{e!r}, {n!r}" for e, n in zip(self.energies_kev, self.photons)]
         content = "\n".join(lines) + "\n"
-        return atomic_write(path, lambda tmp: Path(tmp).write_text(content, encoding="utf-8"))
+        return atomic_write_text(path, content)
 
     @classmethod
     def from_tube(

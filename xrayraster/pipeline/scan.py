@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.files import atomic_write
+from ..core.files import atomic_write, atomic_write_text
 from ..core.projections import Projections
 from ..core.provenance import package_version
 from ..core.tiff import quicklook_factor
@@ -64,7 +64,7 @@ class ScanResult:
         self.labels.save(directory / LABELS_NAME, quicklook=False)
         write_slices(directory / SLICES_NAME, self.volume.data, self.labels.data)
         text = json.dumps(self.metadata, indent=2) + "\n"
-        atomic_write(directory / METADATA_NAME, lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))
+        atomic_write_text(directory / METADATA_NAME, text)
         return directory
 
 

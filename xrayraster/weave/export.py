@@ -26,7 +26,7 @@ import trimesh
 
 from ..core.choices import MESH_FORMATS, check_choice
 from ..core.errors import WeaveError
-from ..core.files import atomic_write
+from ..core.files import atomic_write, atomic_write_text
 from ..core.provenance import package_version
 from ..scene.materials import Material
 from .manifold_mesh import box_minus, from_manifold, to_manifold, union, without_slivers
@@ -110,7 +110,7 @@ def write_parts(parts: list[Part], directory, fmt: str) -> dict[str, str]:
 def write_report(report: dict, directory) -> Path:
     """``report.json`` in ``directory``, written atomically."""
     text = json.dumps({"generator": GENERATOR, "version": package_version(), **report}, indent=2) + "\n"
-    return atomic_write(Path(directory) / REPORT_NAME, lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))
+    return atomic_write_text(Path(directory) / REPORT_NAME, text)
 
 
 def is_export(directory) -> bool:

@@ -314,7 +314,7 @@ class Sample:
         :func:`~xrayraster.weave.resolve.resolve_boolean`, per family
         :func:`~xrayraster.weave.export.settle`), the matrix the box minus the yarns; ``"priority"``
         leaves the overlaps to the scene's priorities. The dict gives ``yarns``, the yarns in the
-        sample by kind (clipped remnants left out), and ``interpenetration_mm3``: the volume between
+        sample by kind (clipped remnants left out), ``tracers`` (their names), and ``interpenetration_mm3``: the volume between
         yarns ``before`` and ``after`` resolving (``after`` None for ``"priority"``); with
         ``measure=False`` that is empty unless the per-yarn boolean measured it anyway (a scan needs none).
         """
@@ -349,7 +349,8 @@ class Sample:
                               PRIORITIES[family], mesh))
         kinds = [yarn.kind for yarn, _ in pieces]
         yarns = {kind: kinds.count(kind) for kind in ("weft", "binder", "stuffer")}
-        return parts, {"yarns": {**yarns, "total": len(kinds)}, "interpenetration_mm3": overlap}
+        return parts, {"yarns": {**yarns, "total": len(kinds)}, "tracers": sorted(tracers),
+                       "interpenetration_mm3": overlap}
 
     def scene(self, materials=None, *, resolve: str = "priority") -> Scene:
         """An ``xr.Scene``: the matrix box (label 1, priority 0), wefts (2, 1) and warps (3, 2).
@@ -383,8 +384,7 @@ class Sample:
         volumes = occupied_volumes(parts, PRIORITIES)
         lo, hi = self.box
         box_volume = float(np.prod(hi - lo))
-        family_materials = self._materials(materials)[0]
-        keys = [p.family if p.material == family_materials[p.family] else p.name for p in parts]  # tracers: own
+        keys = [p.name if p.name in facts["tracers"] else p.family for p in parts]  # a tracer's material is its own
         report = {
             "cell": self.cell.to_dict(),
             "cells": list(self.cells), "layers_of_cells": self.layers_of_cells,
