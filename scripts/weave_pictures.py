@@ -37,12 +37,9 @@ def top_view_scene(materials: YarnMaterials) -> tuple[xr.Scene, np.ndarray, dict
     sample = loaded.sample
     lo, hi = sample.box
     place = Transform.rotation((1.0, 0.0, 0.0), -math.pi / 2) @ Transform.translation(-(lo + hi) / 2)
-    scene = xr.Scene()
-    titles = {}
-    for part in sample.parts(materials, per="family", measure=False)[0]:
-        scene.add(part.mesh, part.material, label=part.label, priority=part.priority, name=part.name,
-                  transform=place)
-        titles[part.material] = part.name if part.name == part.family else f"glass tracer {part.family}"
+    scene = sample.scene(materials, per="family", transform=place)
+    titles = {o.material: o.name if o.name in ("matrix", "weft", "warp") else "glass tracer weft"
+              for o in scene.objects}
     return scene, hi - lo, titles
 
 

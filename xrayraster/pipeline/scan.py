@@ -86,7 +86,7 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False) -
     options = loaded.options
     seconds: dict[str, float] = {}
     with _timed(seconds, "sample"):
-        scene = loaded.sample_scene()
+        scene = loaded.sample_scene(progress=progress is True)
     with Renderer(loaded.geometry) as renderer, CLContext() as cl:
         with _timed(seconds, "projections"):
             projections = renderer.project_all(scene, loaded.spectrum, detector=loaded.detector, noise=options.noise,

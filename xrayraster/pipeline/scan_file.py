@@ -95,11 +95,8 @@ class ScanFile:
         if self.weave is None:
             return self.scene
         lo, hi = self.weave.sample.box
-        shift = Transform.translation(-(lo + hi) / 2)
-        placed = Scene()
-        for o in self.weave.sample.scene(self.weave.materials).objects:
-            placed.add(o.mesh, o.material, label=o.label, priority=o.priority, name=o.name, transform=shift)
-        return placed
+        return self.weave.sample.scene(self.weave.materials, transform=Transform.translation(-(lo + hi) / 2),
+                                       progress=progress)
 
     @property
     def weave_report(self) -> dict | None:

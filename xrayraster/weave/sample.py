@@ -352,18 +352,21 @@ class Sample:
         return parts, {"yarns": {**yarns, "total": len(kinds)}, "tracers": sorted(tracers),
                        "interpenetration_mm3": overlap}
 
-    def scene(self, materials=None, *, resolve: str = "priority") -> Scene:
+    def scene(self, materials=None, *, resolve: str = "priority", per: str = "yarn", transform=None,
+              progress: bool = False) -> Scene:
         """An ``xr.Scene``: the matrix box (label 1, priority 0), wefts (2, 1) and warps (3, 2).
 
         ``materials``: a :class:`~xrayraster.weave.materials.YarnMaterials`, None for its defaults
         (epoxy, and carbon-fibre bundles at fibre volume fraction 0.6), or a dict of its
         ``matrix``/``weft``/``warp`` fields. A tracer yarn takes its own material and keeps its
-        family's priority, and its family's label unless the tracer gives one. ``resolve`` as for
-        :meth:`parts`: scanning needs no boolean, the priorities settle shared space exactly.
+        family's priority, and its family's label unless the tracer gives one. ``resolve`` and ``per``
+        as for :meth:`parts` (scanning needs no boolean: the priorities settle shared space exactly);
+        ``transform`` (an ``xr.Transform``) places every object in the scanner frame.
         """
         scene = Scene()
-        for part in self.parts(materials, resolve=resolve, measure=False)[0]:
-            scene.add(part.mesh, part.material, label=part.label, priority=part.priority, name=part.name)
+        for part in self.parts(materials, per=per, resolve=resolve, measure=False, progress=progress)[0]:
+            scene.add(part.mesh, part.material, label=part.label, priority=part.priority, name=part.name,
+                      transform=transform)
         return scene
 
     def export(self, directory, *, materials=None, per: str = "family", fmt: str = "stl",
