@@ -18,7 +18,7 @@ import pytest
 
 import xrayraster as xr
 from xrayraster.recon import fdk as reconstruction
-from xrayraster.recon.fdk import ReconstructionError, fdk
+from xrayraster.recon.fdk import FDKStream, ReconstructionError, fdk
 from xrayraster.core.geometry import GeometryError
 from xrayraster.core.choices import FILTERS
 
@@ -206,12 +206,45 @@ def test_sphere_from_our_renderer_lands_in_place(cl, render):
 def test_slabs_and_host_resident_views_give_the_same_volume(cl):
     g = CASES["full"]
     p = project([BALL], g)
-    whole = fdk(p, g, SMALL_VOLUME, context=cl).data
+    tall = xr.VolumeGeometry((130, 24, 28), (0.08, 0.45, 0.4))
+    whole = fdk(p, g, tall, context=cl).data  # the volume stays on the device, views streamed into it
     rows, cols = g.detector_shape
-    # Room for half the filtered views and a few planes: views wait in host memory, several slabs.
-    tight = 30 * (rows * cols * 4 + (rows + 2) * (cols + 2) * 4) + 8 * 24 * 28 * 4
-    sliced = fdk(p, g, SMALL_VOLUME, context=cl, memory_limit=tight).data
+    per_view = rows * cols * 4 + (rows + 2) * (cols + 2) * 4
+    # Room for 70 planes and two views, not for the volume: the filtered views wait in host
+    # memory and are backprojected into three slabs (64 + 64 + 2 planes).
+    tight = 70 * 24 * 28 * 4 + 2 * per_view
+    sliced = fdk(p, g, tall, context=cl, memory_limit=tight).data
     np.testing.assert_allclose(sliced, whole, rtol=0, atol=1e-6 * np.abs(whole).max())
+
+
+@pytest.mark.parametrize("case", ["full", "short"])
+def test_views_streamed_in_any_order_and_batch_size(cl, case):
+    """FDKStream fed uneven batches in shuffled order equals the float64 reference, as fdk does."""
+    g = CASES[case]
+    p, want = _reference(case)
+    starts = [0, 1, 8, 9, 30, 47, len(p)]
+    batches = [range(a, b) for a, b in zip(starts, starts[1:])]
+    with FDKStream(g, SMALL_VOLUME, context=cl, batch_views=5) as stream:
+        for k in np.random.default_rng(1).permutation(len(batches)):
+            stream.add(batches[k].start, p[batches[k].start : batches[k].stop])
+        got = stream.result()
+    assert stream.plan.streamed and stream.batch_views == 5
+    assert _max_rel(got.data / 10, want) <= 1e-4 and got.geometry == SMALL_VOLUME
+
+
+def test_a_stream_refuses_missing_repeated_and_stray_views(cl):
+    g = CASES["full"]
+    p = project([BALL], g)
+    with FDKStream(g, SMALL_VOLUME, context=cl) as stream:
+        stream.add(0, p[:10])
+        with pytest.raises(ReconstructionError, match="added already"):
+            stream.add(5, p[5:12])
+        with pytest.raises(ReconstructionError, match="run past the geometry's 60 views"):
+            stream.add(55, p[:10])
+        with pytest.raises(ReconstructionError, match="first must be a view index"):
+            stream.add(-1, p[:1])
+        with pytest.raises(ReconstructionError, match="50 view\\(s\\) not added yet \\(first: 10\\)"):
+            stream.result()
 
 
 def test_transmission_input_is_logged(cl):

@@ -42,7 +42,7 @@ from .physics.detector import Detector
 from .physics.radiograph import Radiograph
 from .physics.spectrum import Spectrum
 from .pipeline import ScanResult, scan
-from .recon.fdk import Volume, fdk
+from .recon.fdk import FDKStream, Volume, fdk
 from .recon.opencl import CLContext
 from .scene.materials import Material
 from .scene.mesh import Mesh, load_mesh
@@ -56,6 +56,7 @@ __all__ = [
     "ConeBeamGeometry",
     "ConfigError",
     "Detector",
+    "FDKStream",
     "GLContext",
     "GLContextError",
     "GeometryError",
