@@ -29,6 +29,7 @@ import numpy as np
 
 from ..core.errors import PhysicsError
 from ..core.geometry import as_vector_geometry
+from .spectral_table import SpectralTable, exact_moments, moment_weights
 from .spectrum import REFERENCE_DISTANCE_MM
 
 
@@ -138,36 +139,57 @@ def _in_order(work, items, threads: int | None):
 # instead of one per bin): its skewness is below 1/sqrt(1000) ≈ 0.03 there. Below it, every
 # bin is drawn from its own Poisson law.
 EXACT_BELOW_PHOTONS = 1000.0
+# With a spectral table a pixel's intermediates weigh as much as a few bins' (moments, weights,
+# indices): blocks of rows sized as for this many bins keep them in cache, several per core.
+TABLE_BLOCK_BINS = 4
 
 
 def sampled_signal(lengths, mu, photons, efficiency, energies, factor, counting: bool, rng,
-                   threads: int | None = None) -> np.ndarray:
+                   threads: int | None = None, table: SpectralTable | None = None) -> np.ndarray:
     """One noisy realisation ``(rows, cols)`` float64 of the detected signal.
 
     Counting: Poisson(Σ_b η_b n_b), one draw per pixel (a sum of independent Poisson variables
     is Poisson). Integrating: Σ_b E_b · Poisson(η_b n_b): drawn bin by bin where a pixel expects
     fewer than :data:`EXACT_BELOW_PHOTONS` photons, else as a Gaussian with the same mean
-    Σ E η n and variance Σ E² η n.
+    Σ E η n and variance Σ E² η n. ``table``: the sums over bins interpolated instead
+    (:mod:`~xrayraster.physics.spectral_table`, built for these ``mu``, photons, efficiency and
+    energies), except in the pixels it does not cover and those drawn bin by bin.
     """
     lengths, mu, photons = _check(lengths, mu, photons)
     efficiency = np.asarray(efficiency, dtype=np.float64)
     energies = np.asarray(energies, dtype=np.float64)
-    if counting:
+    if counting and table is None:
         mean = expected_signal(lengths, mu, photons, efficiency, factor, threads)
         return rng.poisson(mean).astype(np.float64)
     factor = np.broadcast_to(np.asarray(factor, dtype=np.float64), lengths.shape[1:])
     out = np.empty(lengths.shape[1:])
+    cols = lengths.shape[2]
 
     def moments(rows):  # the deterministic part, computed on all cores
-        detected = transmitted_photons(lengths[:, rows], mu, photons * efficiency, factor[rows])
-        mean = np.tensordot(energies, detected, axes=1)
-        spread = np.sqrt(np.tensordot(energies**2, detected, axes=1))
-        few = detected.sum(axis=0) < EXACT_BELOW_PHOTONS
-        return mean, spread, few, detected[:, few]
+        if table is None:
+            detected = transmitted_photons(lengths[:, rows], mu, photons * efficiency, factor[rows])
+            mean = np.tensordot(energies, detected, axes=1)
+            spread = np.sqrt(np.tensordot(energies**2, detected, axes=1))
+            few = detected.sum(axis=0) < EXACT_BELOW_PHOTONS
+            return mean, spread, few, detected[:, few]
+        flat = lengths[:, rows].reshape(len(lengths), -1).astype(np.float64)
+        m, inside = table.moments(flat)
+        if not inside.all():
+            m[~inside] = exact_moments(flat[:, ~inside], mu, moment_weights(photons, efficiency, energies)).T
+        m *= factor[rows].reshape(-1, 1)
+        if counting:
+            return m[:, 2].reshape(-1, cols), None, None, None
+        few = (m[:, 2] < EXACT_BELOW_PHOTONS).reshape(-1, cols)
+        detected = transmitted_photons(lengths[:, rows][:, few][:, None], mu, photons * efficiency,
+                                       factor[rows][few][None])[:, 0]
+        return m[:, 0].reshape(-1, cols), np.sqrt(m[:, 1]).reshape(-1, cols), few, detected
 
     # Draws happen block after block in row order, so the bytes depend on the seed only.
-    blocks = _row_blocks(mu.shape[1], *lengths.shape[1:])
+    blocks = _row_blocks(mu.shape[1] if table is None else TABLE_BLOCK_BINS, *lengths.shape[1:])
     for rows, (mean, spread, few, detected_few) in zip(blocks, _in_order(moments, blocks, threads)):
+        if counting:  # with a table only
+            out[rows] = rng.poisson(mean)
+            continue
         chunk = mean + spread * rng.standard_normal(mean.shape)
         if few.any():
             chunk[few] = energies @ rng.poisson(detected_few)
