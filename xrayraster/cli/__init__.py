@@ -14,7 +14,7 @@ import traceback
 
 from .. import __version__
 from ..core.errors import XrayrasterError
-from . import reconstruct, render, scan, voxelize, weave
+from . import compare, reconstruct, render, scan, voxelize, weave
 
 EXIT_OK, EXIT_UNEXPECTED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 
@@ -28,7 +28,7 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="xrayraster", description="X-ray CT simulation from triangle meshes.")
     parser.add_argument("--version", action="version", version=f"xrayraster {__version__}")
     subparsers = parser.add_subparsers(dest="command", required=True)
-    for command in (scan, weave, render, reconstruct, voxelize):
+    for command in (scan, weave, render, reconstruct, voxelize, compare):
         command.add_parser(subparsers)
     try:
         args = parser.parse_args(argv)
