@@ -12,6 +12,7 @@ reconstructed volumes, as CT tools report it (``Volume.data`` with ``Volume.unit
 # xr.weave.UnitCell, xr.weave.Sample: woven samples (needs no OpenGL)
 from . import weave
 from .core.errors import (
+    CompareError,
     ConfigError,
     GeometryError,
     GLContextError,
@@ -41,7 +42,7 @@ from .gl.voxelize import LabelVolume, voxelize
 from .physics.detector import Detector
 from .physics.radiograph import Radiograph
 from .physics.spectrum import Spectrum
-from .pipeline import ScanResult, scan
+from .pipeline import Comparison, ScanResult, compare, scan
 from .recon.fdk import FDKStream, Volume, fdk
 from .recon.opencl import CLContext
 from .scene.materials import Material
@@ -53,6 +54,8 @@ __version__ = "0.1.0"
 
 __all__ = [
     "CLContext",
+    "CompareError",
+    "Comparison",
     "ConeBeamGeometry",
     "ConfigError",
     "Detector",
@@ -86,6 +89,7 @@ __all__ = [
     "VolumeGeometry",
     "WeaveError",
     "XrayrasterError",
+    "compare",
     "fdk",
     "full_circle",
     "load_mesh",

@@ -57,6 +57,10 @@ class WeaveError(XrayrasterError, ValueError):
     """A woven unit cell or sample cannot be made; the message names the field and the fix."""
 
 
+class CompareError(XrayrasterError, ValueError):
+    """Two volumes (or a mask) cannot be compared, or a metric's library is missing; the message says the fix."""
+
+
 class GLContextError(XrayrasterError, RuntimeError):
     """No usable OpenGL context; the message says what to install."""
 

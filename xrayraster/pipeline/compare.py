@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.errors import XrayrasterError
+from ..core.errors import CompareError
 from ..core.files import atomic_write
 
 MAX_BINS = 256  # default histogram bins at most: over a woven sample's range (about -0.3 to 1.2 cm⁻¹) 0.006 cm⁻¹
@@ -45,10 +45,6 @@ SMOOTH_BINS = 1.0  # σ (bins) of the Gaussian that smooths a histogram before i
 MIN_PROMINENCE = 0.1  # a peak must stand this share of the highest (smoothed) bin above its surroundings
 PLOT_PEAKS = 6  # peaks per curve drawn and listed in the plot (the highest; Comparison keeps all)
 INSTALL = 'pip install "xrayraster[compare]"'
-
-
-class CompareError(XrayrasterError, ValueError):
-    """Two volumes (or a mask) cannot be compared, or a metric's library is missing; the message says the fix."""
 
 
 @dataclass(frozen=True, eq=False)
