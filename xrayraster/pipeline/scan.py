@@ -43,6 +43,7 @@ _GAP_PX = 4  # black space between the pictures of slices.png
 # Views rendered, then filtered and backprojected, per batch: 32 MiB of line integrals at 512²,
 # and (measured) as fast in the backprojection as the FDK's largest batches. docs/scan.md
 BATCH_VIEWS = 32
+STAGES = ("sample", "projections", "fdk", "labels")
 # Per-view lists of Renderer.project_all's provenance, joined across batches.
 _PER_VIEW = ("views", "bins_used", "dropped_signal_share", "starved_pixels")
 
@@ -90,7 +91,7 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False) -
     ``keep_projections``: return the projections too (they are otherwise freed after the FDK)."""
     loaded = scan_file_or_path if isinstance(scan_file_or_path, ScanFile) else load_scan_file(scan_file_or_path)
     options = loaded.options
-    seconds: dict[str, float] = {}
+    seconds = dict.fromkeys(STAGES, 0.0)  # projections and fdk take turns, so each is a sum
     with _timed(seconds, "sample"):
         scene = loaded.sample_scene(progress=progress is True)
     with Renderer(loaded.geometry) as renderer, CLContext() as cl:
