@@ -29,6 +29,7 @@ from ..core.errors import (
 from ..core.geometry import ConeBeamGeometry, ParallelBeamGeometry, geometry_from_dict
 from ..core.transform import Transform
 from ..physics.detector import Detector
+from ..physics.realism import Realism
 from ..physics.spectrum import Spectrum
 from ..scene.material_library import library_key
 from ..scene.materials import ENERGY_MAX_KEV, ENERGY_MIN_KEV, Material
@@ -40,7 +41,8 @@ class SceneFile:
     """A loaded scene file. ``materials`` ({NAME: Material}): the ``[materials]`` table and the
     library materials the objects use by name; None when the file has no ``[materials]`` and some
     object's material is neither (then only path lengths can be rendered). ``spectrum`` and
-    ``detector`` are None when the file has no ``[source]`` or ``[detector]`` table."""
+    ``detector`` are None when the file has no ``[source]`` or ``[detector]`` table; ``realism``
+    holds the scanner's imperfections those tables ask for (docs/realism.md)."""
 
     path: Path
     geometry: ConeBeamGeometry | ParallelBeamGeometry
@@ -48,6 +50,7 @@ class SceneFile:
     materials: dict | None = None
     spectrum: Spectrum | None = None
     detector: Detector | None = None
+    realism: Realism = Realism()
 
 
 _OBJECT_KEYS = {"name", "mesh", "material", "label", "priority", "unit_scale", "translate", "rotate_deg"}
@@ -59,6 +62,7 @@ _SOURCE_KINDS = {  # the key that picks the kind → every key of that kind
     "monochromatic_kev": {"monochromatic_kev", "photons_per_mm2_at_1m"},
     "spectrum_file": {"spectrum_file"},
 }
+_SOURCE_REALISM_KEYS = {"focal_spot_mm", "focal_plane_mm"}  # any source kind
 _DETECTOR_KEYS = {"mode", "scintillator", "scintillator_mm", "blur_sigma_px", "electronic_noise", "dark"}
 _MAX_SUBDIVISIONS = 8  # 1.3 million triangles
 _MAX_SECTIONS = 10_000
@@ -106,7 +110,7 @@ def load_scene_file(path) -> SceneFile:
     detector = None
     if "detector" in data:
         detector = _detector(fields.table(data["detector"], "detector", f"{path}"), materials, f"{path} [detector]")
-    return SceneFile(path, geometry, scene, materials, spectrum, detector)
+    return SceneFile(path, geometry, scene, materials, spectrum, detector, _realism(data, geometry, path))
 
 
 def _add_object(scene: Scene, spec: dict, base: Path, where: str, materials: dict | None = None,
@@ -246,7 +250,7 @@ def _material(spec, name: str, where: str) -> Material:
 
 
 def _source(src: dict, base: Path, where: str) -> Spectrum:
-    fields.only(src, set().union(*_SOURCE_KINDS.values()), where)
+    fields.only(src, set().union(*_SOURCE_KINDS.values(), _SOURCE_REALISM_KEYS), where)
     kinds = [k for k in _SOURCE_KINDS if k in src]
     if len(kinds) != 1:
         given = f"got {' and '.join(kinds)}" if kinds else "got none"
@@ -254,7 +258,7 @@ def _source(src: dict, base: Path, where: str) -> Spectrum:
             f"{where}: give exactly one source kind: kvp (an X-ray tube), monochromatic_kev, or spectrum_file ({given})"
         )
     kind = kinds[0]
-    stray = sorted(set(src) - _SOURCE_KINDS[kind])
+    stray = sorted(set(src) - _SOURCE_KINDS[kind] - _SOURCE_REALISM_KEYS)
     if stray:
         raise ConfigError(
             f"{where}: {', '.join(stray)} do(es) not apply to a {kind} source; "
@@ -327,3 +331,26 @@ def _detector(spec: dict, materials: dict | None, where: str) -> Detector:
         )
     except PhysicsError as exc:  # pragma: no cover - every field is checked above
         raise ConfigError(f"{where}: {exc}") from None
+
+
+def _realism(data: dict, geometry, path: Path) -> Realism:
+    """The scanner's imperfections (docs/realism.md) from ``[source]`` (``focal_spot_mm``,
+    ``focal_plane_mm``); all off by default."""
+    source = data.get("source", {})
+    where_source = f"{path} [source]"
+    options = {}
+    if "focal_spot_mm" in source:
+        options["focal_spot_mm"] = fields.number(source["focal_spot_mm"], "focal_spot_mm", where_source,
+                                                 nonnegative=True)
+        if options["focal_spot_mm"] and geometry.beam != "cone":
+            raise ConfigError(f"{where_source}: focal_spot_mm applies to cone-beam scans; a parallel beam has no "
+                              "source point (remove it, or use beam = \"cone\")")
+    if "focal_plane_mm" in source:
+        plane = fields.number(source["focal_plane_mm"], "focal_plane_mm", where_source, positive=True)
+        if not options.get("focal_spot_mm"):
+            raise ConfigError(f"{where_source}: focal_plane_mm needs focal_spot_mm > 0 (the spot whose blur it places)")
+        if plane >= geometry.source_to_detector:
+            raise ConfigError(f"{where_source}: focal_plane_mm ({plane:g} mm from the source) must lie before the "
+                              f"detector (source_to_detector = {geometry.source_to_detector:g} mm)")
+        options["focal_plane_mm"] = plane
+    return Realism(**options)

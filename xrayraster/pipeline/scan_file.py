@@ -4,7 +4,8 @@ The tables are the scene file's (docs/scene-format.md), read by its parsers, wit
 either as ``[[objects]]`` or as a ``[weave]`` table (docs/weave.md, read by the weave file's
 parser; ``[materials.NAME]`` serve both), and two more: ``[volume]``, the reconstruction grid in
 the dict form of :class:`~xrayraster.core.volume.VolumeGeometry`, and ``[scan]``, the options
-(:class:`ScanOptions`). ``[source]`` is required (a scan makes radiographs). A weave sample's
+(:class:`ScanOptions`). ``[source]`` is required (a scan makes radiographs). The scanner's imperfections (docs/realism.md) are keys of ``[source]``
+and ``[detector]``, as in scene files. A weave sample's
 ``[geometry]`` defaults to the framing scan ``xrayraster weave`` writes, and the sample is placed
 as there: its box centred on the rotation axis, its thickness along z. The default ``[volume]`` is
 the grid over the sample's box (the objects' bounds) at the scan's magnified pixel pitch. Every
@@ -25,9 +26,10 @@ from ..core.errors import ConfigError
 from ..core.geometry import ConeBeamGeometry, ParallelBeamGeometry
 from ..core.transform import Transform
 from ..core.volume import VolumeGeometry
-from ..io.scene_file import _add_object, _detector, _geometry, _materials, _source, read_toml
+from ..io.scene_file import _add_object, _detector, _geometry, _materials, _realism, _source, read_toml
 from ..io.weave_file import WeaveFile, framing_geometry, sample_grid, weave_from_dict
 from ..physics.detector import Detector
+from ..physics.realism import Realism
 from ..physics.spectrum import Spectrum
 from ..scene.materials import Material
 from ..scene.scene import Scene
@@ -77,7 +79,8 @@ class ScanOptions:
 class ScanFile:
     """A loaded scan file. The sample is ``scene`` (from ``[[objects]]``) or ``weave`` (from
     ``[weave]``, meshed by :meth:`sample_scene`); the other is None. ``box_mm``: the sample's
-    ``(2, 3)`` min/max corners in the scanner frame (a weave's as placed there)."""
+    ``(2, 3)`` min/max corners in the scanner frame (a weave's as placed there). ``realism``: the
+    scanner's imperfections."""
 
     path: Path
     scene: Scene | None
@@ -89,6 +92,7 @@ class ScanFile:
     detector: Detector | None
     options: ScanOptions
     mesh_resolution: dict | None = None  # a weave's knobs, and whether the grid chose them (mesh_resolution_for)
+    realism: Realism = Realism()
 
     def sample_scene(self, progress: bool = False) -> Scene:
         """The scene to scan: the objects, or the weave meshed and moved so its box is centred on the axis."""
@@ -153,7 +157,7 @@ def load_scan_file(path) -> ScanFile:
                  for k in ("points_per_section", "samples_per_mm")}
         weave, resolution = mesh_resolution_for(weave, volume, options.mesh_tolerance_voxels, given)
     return ScanFile(path, scene, weave, np.asarray(box, dtype=np.float64), geometry, volume, spectrum, detector,
-                    options, resolution)
+                    options, resolution, _realism(data, geometry, path))
 
 
 def mesh_resolution_for(weave: WeaveFile, volume: VolumeGeometry, tolerance_voxels: float,
@@ -182,3 +186,4 @@ def _objects(objects, path: Path, materials: dict | None) -> tuple[Scene, dict]:
         where = f"{path} [[objects]] #{k + 1}"
         _add_object(scene, fields.table(spec, "objects", where), path.parent, where, materials or {}, library)
     return scene, {**library, **(materials or {})}
+

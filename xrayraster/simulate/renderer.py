@@ -13,6 +13,7 @@ from ..gl.pathlengths import PathLengthRenderer
 from ..physics.beer_lambert import pixel_photon_factor, thread_count
 from ..physics.detector import Detector
 from ..physics.radiograph import Radiograph, radiograph
+from ..physics.realism import Realism, focal_sigma_px
 from ..scene.scene import Scene
 
 
@@ -28,22 +29,32 @@ class Renderer(PathLengthRenderer):
         super().__init__(geometry, **options)
 
     def project(self, scene: Scene, spectrum, view: int = 0, *, detector: Detector | None = None,
-                output: str = "lineint", noise: bool = False, seed: int | None = None) -> Radiograph:
+                output: str = "lineint", noise: bool = False, seed: int | None = None,
+                realism: Realism | None = None) -> Radiograph:
         """The radiograph of one view (:class:`~xrayraster.physics.radiograph.Radiograph`).
 
         Scene materials must be :class:`~xrayraster.Material` objects. ``output``: ``"raw"``
         (detector signal), ``"transmission"`` or ``"lineint"`` (−ln of it). With ``noise``,
         quantum and electronic noise are drawn from a generator seeded by ``(seed, view)``:
         the same seed gives the same bytes, and every view its own independent stream.
+        ``realism``: the scanner's imperfections (:class:`~xrayraster.physics.realism.Realism`;
+        default none).
         """
+        realism = realism or Realism()
         if noise and seed is None:
             raise RenderError("noise=True needs a seed (an int), so the noise is reproducible")
+        detector = detector or Detector()
         lengths = self.path_lengths(scene, view)
         view %= self.vector_geometry.num_views
         rng = np.random.default_rng([int(seed), view]) if noise else None
         factor = pixel_photon_factor(self.vector_geometry, view)
-        return radiograph(lengths, scene.materials, spectrum, detector or Detector(), factor, output=output,
-                          noise=noise, rng=rng, threads=self.threads)
+        return radiograph(lengths, scene.materials, spectrum, detector, factor, output=output, noise=noise, rng=rng,
+                          threads=self.threads, focal_sigma_px=self._focal_sigma_px(realism, view))
+
+    def _focal_sigma_px(self, realism: Realism, view: int) -> tuple[float, float]:
+        if not realism.focal_spot_mm:
+            return (0.0, 0.0)
+        return focal_sigma_px(self.vector_geometry, view, realism.focal_spot_mm, realism.focal_plane_mm)
 
     # -- every view in one call ----------------------------------------------------------------
 
@@ -67,20 +78,24 @@ class Renderer(PathLengthRenderer):
 
     def project_all(self, scene: Scene, spectrum, views=None, *, detector: Detector | None = None,
                     output: str = "lineint", noise: bool = False, seed: int | None = None,
-                    progress=None) -> Projections:
+                    realism: Realism | None = None, progress=None) -> Projections:
         """The radiographs of ``views`` (default every view) stacked into an
         :class:`~xrayraster.Projections` on ``geometry[views]``, each view exactly :meth:`project`
         (same options; noise streams are seeded per view index, so a subset gives the same bytes
         as the full run). Unit: ``"1"`` for lineint and transmission; raw is ``"counts"`` for a
         counting detector, else ``"keV deposited"``. The provenance records the views, materials,
         spectrum, detector, seed and per-view bins, dropped signal and starved pixels, as the
-        command line writes them. ``progress`` as in :meth:`path_lengths_all`.
+        command line writes them, and the realism options when any is on. ``progress`` as in
+        :meth:`path_lengths_all`.
         """
         views = self._views(views)
         detector = detector or Detector()
-        shots = [self.project(scene, spectrum, v, detector=detector, output=output, noise=noise, seed=seed)
-                 for v in _report(views, progress, output)]
+        realism = realism or Realism()
+        shots = [self.project(scene, spectrum, v, detector=detector, output=output, noise=noise, seed=seed,
+                              realism=realism) for v in _report(views, progress, output)]
         unit = "1" if output != "raw" else "counts" if detector.counting else "keV deposited"
+        # An ideal scan's provenance stays as it was before the realism options existed.
+        extra = {"realism": realism.to_dict()} if realism.active else {}
         return Projections(np.stack([shot.image for shot in shots]), self.geometry[views], output, unit, {
             "materials": [_material_name(m) for m in scene.materials],
             "material_compositions": [repr(m) for m in scene.materials],
@@ -97,6 +112,7 @@ class Renderer(PathLengthRenderer):
             "supersampling": self.supersampling,
             "method": self.last_method,
             "renderer": self.gl.renderer,
+            **extra,
         })
 
     def _views(self, views) -> list[int]:

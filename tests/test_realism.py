@@ -1,0 +1,176 @@
+"""Scanner realism (xrayraster.physics.realism, docs/realism.md), each option against an independent
+expectation: the focal spot's edge against the erf of a Gaussian penumbra spot·(M − 1) and against
+sub-source sampling."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import trimesh
+
+import xrayraster as xr
+from xrayraster.core.errors import ConfigError, PhysicsError
+from xrayraster.io.scene_file import load_scene_file
+from xrayraster.physics.radiograph import radiograph
+from xrayraster.physics.realism import FWHM_PER_SIGMA, Realism
+
+AL = xr.Material.element("Al")
+
+
+def phi(x):
+    """The standard normal CDF: a unit step convolved with a Gaussian of σ = 1."""
+    return 0.5 * (1 + np.vectorize(math.erf)(np.asarray(x) / math.sqrt(2)))
+
+
+def edge_sigma(x, profile):
+    """σ of an erf-shaped rising edge from its 10 % and 90 % crossings (profile normalised 0 → 1)."""
+    x10, x90 = np.interp([0.1, 0.9], profile, x)
+    return (x90 - x10) / (2 * 1.2815515655446004)  # Φ⁻¹(0.9) = 1.28155...
+
+
+# ----------------------------------------------------------------------------- focal spot
+
+SOD, SDD, PIXEL, SPOT = 100.0, 300.0, 0.1, 0.4  # mm; magnification 3 at the axis
+EDGE_SHAPE = (4, 128)  # an even number of columns: the central ray runs between two pixels
+EDGE_X = (np.arange(EDGE_SHAPE[1]) - (EDGE_SHAPE[1] - 1) / 2) * PIXEL  # column centres on the detector, mm
+MONO = xr.Spectrum.monochromatic(30.0, 1e6)
+
+
+def plate(depth_mm: float) -> xr.Scene:
+    """A 1 mm aluminium plate facing the source, ``depth_mm`` beyond the axis, its edge on the plane x = 0:
+    that plane holds the source, so the edge projects onto the boundary between the central columns."""
+    scene = xr.Scene()
+    scene.add(trimesh.creation.box((40.0, 1.0, 10.0)), AL, transform=xr.Transform.translation((-20.0, depth_mm, 0.0)))
+    return scene
+
+
+def normalised_edge(image: np.ndarray) -> np.ndarray:
+    row = image[EDGE_SHAPE[0] // 2].astype(np.float64)
+    return (row - row[0]) / (row[-1] - row[0])
+
+
+def sub_source_edge(renderer_gl, depth_mm: float) -> np.ndarray:
+    """The reference: the plate seen from 161 source points across the spot (Gaussian weights over ±4σ,
+    along the detector's columns), the transmissions averaged. Each point renders an unblurred view."""
+    s, d, u, v = np.split(xr.ConeBeamGeometry(SOD, SDD, EDGE_SHAPE, PIXEL, [0.0]).to_vec().array[0], 4)
+    offsets = np.linspace(-4, 4, 161)
+    weights = np.exp(-offsets**2 / 2)
+    shift = SPOT / FWHM_PER_SIGMA * u / np.linalg.norm(u)
+    sources = xr.VectorGeometry("cone", EDGE_SHAPE, [np.concatenate([s + a * shift, d, u, v]) for a in offsets])
+    mu = AL.attenuation(30.0)
+    with xr.Renderer(sources, context=renderer_gl) as r:
+        transmissions = [np.exp(-mu * r.path_lengths(plate(depth_mm), k)[0]) for k in range(len(offsets))]
+    return normalised_edge(np.tensordot(weights / weights.sum(), transmissions, axes=1))
+
+
+def test_focal_spot_edge_at_the_axis_is_the_erf_of_a_penumbra_spot_times_m_minus_1(gl):
+    geometry = xr.ConeBeamGeometry(SOD, SDD, EDGE_SHAPE, PIXEL, [0.0])
+    with xr.Renderer(geometry, context=gl) as r:
+        sharp = normalised_edge(r.project(plate(0.0), MONO, output="transmission").image)
+        blurred = normalised_edge(r.project(plate(0.0), MONO, output="transmission",
+                                            realism=Realism(focal_spot_mm=SPOT)).image)
+    middle = EDGE_SHAPE[1] // 2
+    assert np.all(sharp[:middle] < 1e-3) and np.all(sharp[middle:] > 1 - 1e-3)  # a point source: a step at x = 0
+    penumbra_fwhm = SPOT * (SDD / SOD - 1)  # mm on the detector
+    sigma = penumbra_fwhm / FWHM_PER_SIGMA
+    np.testing.assert_allclose(blurred, phi(EDGE_X / sigma), atol=1e-3)
+    assert edge_sigma(EDGE_X, blurred) * FWHM_PER_SIGMA == pytest.approx(penumbra_fwhm, rel=0.01)
+
+
+@pytest.mark.parametrize("depth_mm", [0.0, 30.0])
+def test_focal_blur_model_at_its_plane_equals_sub_source_sampling(gl, depth_mm):
+    z = SOD + depth_mm
+    geometry = xr.ConeBeamGeometry(SOD, SDD, EDGE_SHAPE, PIXEL, [0.0])
+    with xr.Renderer(geometry, context=gl) as r:
+        model = normalised_edge(r.project(plate(depth_mm), MONO, output="transmission",
+                                          realism=Realism(focal_spot_mm=SPOT, focal_plane_mm=z)).image)
+        at_axis = normalised_edge(r.project(plate(depth_mm), MONO, output="transmission",
+                                            realism=Realism(focal_spot_mm=SPOT)).image)
+    reference = sub_source_edge(gl, depth_mm)
+    assert np.abs(model - reference).max() < 0.012  # of the edge's step
+    # The penumbra at depth z is spot · (SDD − z) / z (the reference's within 3 %: each of its source
+    # points sees a pixel-sharp edge); the model set for the axis keeps the axis's.
+    assert edge_sigma(EDGE_X, reference) * FWHM_PER_SIGMA == pytest.approx(SPOT * (SDD - z) / z, rel=0.03)
+    assert edge_sigma(EDGE_X, at_axis) * FWHM_PER_SIGMA == pytest.approx(SPOT * (SDD / SOD - 1), rel=0.01)
+
+
+@pytest.mark.parametrize("counting", [False, True])
+def test_focal_spot_noise_has_the_mean_and_variance_of_the_blurred_intensity(counting):
+    """Noise drawn after the blur: per pixel the compound Poisson moments Σ w·n and Σ E²·n (integrating)
+    or Σ n (counting) of a low-dose spectrum, and no correlation between neighbours."""
+    tube = xr.Spectrum([20.0, 30.0, 45.0, 60.0], [1e5, 4e5, 3e5, 5e4])
+    factor = 80.0 / tube.total  # 80 photons a pixel: the compound Poisson regime
+    detector = xr.Detector("counting" if counting else "integrating")
+    lengths = np.zeros((1, 96, 96), np.float32)
+    got = radiograph(lengths, [AL], tube, detector, factor, output="raw", noise=True, bin_tolerance=0,
+                     rng=np.random.default_rng(4), focal_sigma_px=(2.0, 1.5)).image.astype(np.float64)
+    e, n = tube.energies, tube.fluence * factor
+    mean, variance = ((n.sum(), n.sum()) if counting else ((e * n).sum(), (e * e * n).sum()))
+    assert got.mean() == pytest.approx(mean, rel=0.01)
+    assert got.var() == pytest.approx(variance, rel=0.06)
+    neighbours = np.corrcoef(got[:, :-1].ravel(), got[:, 1:].ravel())[0, 1]
+    assert abs(neighbours) < 0.04
+
+
+def test_focal_spot_needs_a_cone_beam_and_a_plane_before_the_detector(gl):
+    scene = plate(0.0)
+    with xr.Renderer(xr.ParallelBeamGeometry(EDGE_SHAPE, PIXEL, [0.0]), context=gl) as r:
+        with pytest.raises(PhysicsError, match="cone-beam"):
+            r.project(scene, MONO, realism=Realism(focal_spot_mm=0.1))
+    with xr.Renderer(xr.ConeBeamGeometry(SOD, SDD, EDGE_SHAPE, PIXEL, [0.0]), context=gl) as r:
+        with pytest.raises(PhysicsError, match="between the source and the detector"):
+            r.project(scene, MONO, realism=Realism(focal_spot_mm=0.1, focal_plane_mm=SDD))
+    with pytest.raises(PhysicsError, match="focal_plane_mm needs focal_spot_mm"):
+        Realism(focal_plane_mm=50.0)
+
+
+# ----------------------------------------------------------------------------- configuration
+
+
+def scene_text(source: str = "", detector: str = "", beam: str = "cone") -> str:
+    geometry = ("source_to_origin = 100.0\nsource_to_detector = 200.0\n" if beam == "cone" else "")
+    return f"""
+[geometry]
+beam = "{beam}"
+{geometry}detector_shape = [16, 16]
+pixel_size = 0.5
+num_views = 4
+
+[[objects]]
+mesh = {{ box = [4, 4, 4] }}
+material = "aluminium"
+
+[source]
+monochromatic_kev = 30.0
+photons_per_mm2_at_1m = 1e6
+{source}
+
+[detector]
+mode = "counting"
+{detector}
+"""
+
+
+def test_realism_keys_are_read_from_source_and_detector(tmp_path):
+    path = tmp_path / "scene.toml"
+    path.write_text(scene_text("focal_spot_mm = 0.05\nfocal_plane_mm = 90.0"))
+    loaded = load_scene_file(path)
+    assert loaded.realism == Realism(focal_spot_mm=0.05, focal_plane_mm=90.0)
+    path.write_text(scene_text())
+    assert load_scene_file(path).realism == Realism() and not Realism().active
+
+
+@pytest.mark.parametrize("source, detector, beam, message", [
+    ("focal_spot_mm = -1", "", "cone", r"\[source\]: focal_spot_mm must be >= 0"),
+    ("focal_spot_mm = 0.1", "", "parallel", r"\[source\]: focal_spot_mm applies to cone-beam scans"),
+    ("focal_plane_mm = 50", "", "cone", r"\[source\]: focal_plane_mm needs focal_spot_mm > 0"),
+    ("focal_spot_mm = 0.1\nfocal_plane_mm = 200", "", "cone",
+     r"focal_plane_mm \(200 mm from the source\) must lie before"),
+])
+def test_realism_errors_name_the_key_and_the_fix(tmp_path, source, detector, beam, message):
+    path = tmp_path / "scene.toml"
+    path.write_text(scene_text(source, detector, beam))
+    with pytest.raises(ConfigError, match=message):
+        load_scene_file(path)
