@@ -1,6 +1,6 @@
 """Scanner realism (xrayraster.physics.realism, docs/realism.md), each option against an independent
 expectation: the focal spot's edge against the erf of a Gaussian penumbra spot·(M − 1) and against
-sub-source sampling."""
+sub-source sampling; the flats' noise against Poisson statistics."""
 
 from __future__ import annotations
 
@@ -126,6 +126,60 @@ def test_focal_spot_needs_a_cone_beam_and_a_plane_before_the_detector(gl):
         Realism(focal_plane_mm=50.0)
 
 
+# ----------------------------------------------------------------------------- flat fields
+
+OPEN = (96, 96)
+PHOTONS = 1e4  # per pixel: a parallel beam's 1 mm² pixels collect the fluence as is
+READ_NOISE = 30.0  # counts
+
+
+def open_beam() -> xr.Scene:
+    """An object far above the detector's rows: every pixel sees the open beam."""
+    scene = xr.Scene()
+    scene.add(trimesh.creation.box((1.0, 1.0, 1.0)), AL, transform=xr.Transform.translation((0.0, 0.0, 500.0)))
+    return scene
+
+
+def open_views(gl, realism, *, noise, seed=11, views=3):
+    geometry = xr.ParallelBeamGeometry(OPEN, 1.0, xr.full_circle(views))
+    detector = xr.Detector("counting", electronic_noise=READ_NOISE)
+    with xr.Renderer(geometry, context=gl) as r:
+        return r.project_all(open_beam(), xr.Spectrum.monochromatic(30.0, PHOTONS), detector=detector,
+                             output="transmission", noise=noise, seed=seed, realism=realism, progress=False)
+
+
+@pytest.mark.parametrize("frames", [1, 4])
+def test_flat_fields_add_their_poisson_variance_and_share_it_between_views(gl, frames):
+    """One exposure's relative variance is σ² = (n + e²)/n² (Poisson n, read noise e); a flat averaged
+    from N has σ²/N, and normalising by it gives σ²(1 + 1/N), the flat's part common to every view."""
+    one = (PHOTONS + READ_NOISE**2) / PHOTONS**2
+    noisy = open_views(gl, Realism(flat_fields=frames), noise=True).data.astype(np.float64)
+    assert noisy.var(axis=(1, 2)).mean() == pytest.approx(one * (1 + 1 / frames), rel=0.05)
+    shared = np.mean([np.cov(noisy[a].ravel(), noisy[b].ravel())[0, 1] for a, b in ((0, 1), (1, 2), (0, 2))])
+    assert shared == pytest.approx(one / frames, rel=0.1)
+    clean = open_views(gl, Realism(flat_fields=frames), noise=False).data.astype(np.float64)
+    assert np.abs(clean - clean[0]).max() < 1e-6  # one flat for the scan
+    assert (1 / clean[0]).var() == pytest.approx(one / frames, rel=0.05)
+    exact = open_views(gl, Realism(), noise=True).data.astype(np.float64)
+    assert exact.var(axis=(1, 2)).mean() == pytest.approx(one, rel=0.05)
+
+
+def test_flat_fields_are_seeded_apart_from_the_views_and_the_same_for_any_subset_of_views(gl):
+    realism = Realism(flat_fields=2)
+    full = open_views(gl, realism, noise=True, seed=3)
+    geometry = xr.ParallelBeamGeometry(OPEN, 1.0, xr.full_circle(3))
+    with xr.Renderer(geometry, context=gl) as r:
+        alone = r.project(open_beam(), xr.Spectrum.monochromatic(30.0, PHOTONS),
+                          2, detector=xr.Detector("counting", electronic_noise=READ_NOISE), output="transmission",
+                          noise=True, seed=3, realism=realism).image
+        with pytest.raises(xr.RenderError, match="need a seed"):
+            r.project(open_beam(), MONO, realism=realism)
+    assert alone.tobytes() == full.data[2].tobytes()
+    assert full.provenance["realism"] == realism.to_dict()
+    other = open_views(gl, realism, noise=False, seed=4).data
+    assert not np.allclose(other[0], open_views(gl, realism, noise=False, seed=3).data[0])
+
+
 # ----------------------------------------------------------------------------- configuration
 
 
@@ -155,9 +209,9 @@ mode = "counting"
 
 def test_realism_keys_are_read_from_source_and_detector(tmp_path):
     path = tmp_path / "scene.toml"
-    path.write_text(scene_text("focal_spot_mm = 0.05\nfocal_plane_mm = 90.0"))
+    path.write_text(scene_text("focal_spot_mm = 0.05\nfocal_plane_mm = 90.0", "flat_fields = 8"))
     loaded = load_scene_file(path)
-    assert loaded.realism == Realism(focal_spot_mm=0.05, focal_plane_mm=90.0)
+    assert loaded.realism == Realism(focal_spot_mm=0.05, focal_plane_mm=90.0, flat_fields=8)
     path.write_text(scene_text())
     assert load_scene_file(path).realism == Realism() and not Realism().active
 
@@ -168,6 +222,8 @@ def test_realism_keys_are_read_from_source_and_detector(tmp_path):
     ("focal_plane_mm = 50", "", "cone", r"\[source\]: focal_plane_mm needs focal_spot_mm > 0"),
     ("focal_spot_mm = 0.1\nfocal_plane_mm = 200", "", "cone",
      r"focal_plane_mm \(200 mm from the source\) must lie before"),
+    ("", "flat_fields = 0", "cone", r"\[detector\]: flat_fields must be an integer >= 1"),
+    ("", "flat_fields = 2.5", "cone", r"\[detector\]: flat_fields must be an integer >= 1"),
 ])
 def test_realism_errors_name_the_key_and_the_fix(tmp_path, source, detector, beam, message):
     path = tmp_path / "scene.toml"

@@ -63,7 +63,9 @@ _SOURCE_KINDS = {  # the key that picks the kind → every key of that kind
     "spectrum_file": {"spectrum_file"},
 }
 _SOURCE_REALISM_KEYS = {"focal_spot_mm", "focal_plane_mm"}  # any source kind
-_DETECTOR_KEYS = {"mode", "scintillator", "scintillator_mm", "blur_sigma_px", "electronic_noise", "dark"}
+_DETECTOR_REALISM_KEYS = {"flat_fields"}
+_DETECTOR_KEYS = {"mode", "scintillator", "scintillator_mm", "blur_sigma_px", "electronic_noise", "dark",
+                  *_DETECTOR_REALISM_KEYS}
 _MAX_SUBDIVISIONS = 8  # 1.3 million triangles
 _MAX_SECTIONS = 10_000
 
@@ -335,9 +337,9 @@ def _detector(spec: dict, materials: dict | None, where: str) -> Detector:
 
 def _realism(data: dict, geometry, path: Path) -> Realism:
     """The scanner's imperfections (docs/realism.md) from ``[source]`` (``focal_spot_mm``,
-    ``focal_plane_mm``); all off by default."""
-    source = data.get("source", {})
-    where_source = f"{path} [source]"
+    ``focal_plane_mm``) and ``[detector]`` (``flat_fields``); all off by default."""
+    source, detector = data.get("source", {}), data.get("detector", {})
+    where_source, where_detector = f"{path} [source]", f"{path} [detector]"
     options = {}
     if "focal_spot_mm" in source:
         options["focal_spot_mm"] = fields.number(source["focal_spot_mm"], "focal_spot_mm", where_source,
@@ -353,4 +355,6 @@ def _realism(data: dict, geometry, path: Path) -> Realism:
             raise ConfigError(f"{where_source}: focal_plane_mm ({plane:g} mm from the source) must lie before the "
                               f"detector (source_to_detector = {geometry.source_to_detector:g} mm)")
         options["focal_plane_mm"] = plane
+    if "flat_fields" in detector:
+        options["flat_fields"] = fields.integer(detector["flat_fields"], "flat_fields", where_detector, 1)
     return Realism(**options)

@@ -1,9 +1,10 @@
 """One radiograph from per-material path lengths: spectrum × materials × detector (+ noise).
 
-The flat field is the noise-free signal with nothing in the beam (a scanner averages many flats),
-the dark field the detector's mean offset; ``transmission`` and ``lineint`` are normalised by
-them as a scanner does (:func:`xrayraster.physics.beer_lambert.normalise`). The scanner's
-imperfections (a focal spot) are modelled in :mod:`xrayraster.physics.realism`.
+The flat field is the noise-free signal with nothing in the beam (a scanner averages many flats)
+unless a scan's finite number of flats gives it noise (``flat_noise``), the dark field the
+detector's mean offset; ``transmission`` and ``lineint`` are normalised by them as a scanner does
+(:func:`xrayraster.physics.beer_lambert.normalise`). The scanner's imperfections (a focal spot,
+noisy flats) are modelled in :mod:`xrayraster.physics.realism`.
 """
 
 from __future__ import annotations
@@ -52,8 +53,8 @@ BIN_TOLERANCE = 1e-6
 
 
 def radiograph(lengths, materials, spectrum, detector: Detector, factor, *, output="lineint", noise=False, rng=None,
-               bin_tolerance: float = BIN_TOLERANCE, threads: int | None = None,
-               focal_sigma_px=(0.0, 0.0)) -> Radiograph:
+               bin_tolerance: float = BIN_TOLERANCE, threads: int | None = None, focal_sigma_px=(0.0, 0.0),
+               flat_noise=None) -> Radiograph:
     """The radiograph of one view.
 
     ``lengths``: ``(channels, rows, cols)`` mm, channels in ``materials`` order; ``spectrum``:
@@ -63,7 +64,8 @@ def radiograph(lengths, materials, spectrum, detector: Detector, factor, *, outp
     ``bin_tolerance``: see :data:`BIN_TOLERANCE` (0 keeps every non-empty bin); ``threads``: of the
     spectral sum (default every core; :func:`~xrayraster.physics.beer_lambert.thread_count`).
     The scanner's imperfections (:mod:`~xrayraster.physics.realism`): ``focal_sigma_px``, the focal
-    spot's Gaussian blur ``(rows, cols)`` in pixels.
+    spot's Gaussian blur ``(rows, cols)`` in pixels; ``flat_noise``, the scan's flat over the exact
+    one (:func:`flat_noise`).
     """
     check_choice(output, RADIOGRAPH_OUTPUTS, "output", PhysicsError)
     if noise and rng is None:
@@ -76,6 +78,8 @@ def radiograph(lengths, materials, spectrum, detector: Detector, factor, *, outp
     if output == "raw":
         return Radiograph(raw.astype(np.float32), output, 0, len(energies), dropped)
     flat = _exact_flat(photons, energies, detector, factor, raw.shape, focal_sigma_px)
+    if flat_noise is not None:
+        flat = detector.dark + (flat - detector.dark) * flat_noise
     weights = detector.weights(energies)
     floor = 0.5 * float((photons * weights).sum() / photons.sum())  # half a mean detected photon
     normalised = beer_lambert.normalise(raw, flat, detector.dark, floor)
@@ -87,6 +91,27 @@ def radiograph(lengths, materials, spectrum, detector: Detector, factor, *, outp
         clamped = np.asarray(raw, dtype=np.float64) - detector.dark <= 0  # counted by normalise already
         starved += int(np.count_nonzero((image == 0) & ~clamped))
     return Radiograph(image, output, starved, len(energies), dropped)
+
+
+def flat_noise(spectrum, detector: Detector, factor, shape: tuple[int, int], frames: int, rng, *,
+               focal_sigma_px=(0.0, 0.0), bin_tolerance: float = BIN_TOLERANCE,
+               threads: int | None = None) -> np.ndarray:
+    """A scan's flat from ``frames`` noisy open-beam exposures, as a factor on the exact flat:
+    ``(flat − dark) / (exact flat − dark)`` per pixel, float64 ``shape``.
+
+    The flats' mean is drawn in one go: the sum of ``frames`` independent exposures is one exposure
+    of ``frames`` times the photons, and their read noises average to ``electronic_noise / √frames``.
+    """
+    energies, photons, _ = _bins(spectrum, detector, bin_tolerance)
+    open_beam = np.zeros((1, *shape), np.float32), np.zeros((1, len(energies)))  # no path length, no μ
+    exposed = _detected(*open_beam, photons, energies, detector, frames * np.asarray(factor, dtype=np.float64),
+                        focal_sigma_px, rng, threads) / frames
+    flat = detector.read_out(exposed, rng, frames=frames) - detector.dark
+    ratio = flat / (_exact_flat(photons, energies, detector, factor, shape, focal_sigma_px) - detector.dark)
+    if np.any(ratio <= 0):
+        raise PhysicsError(f"the mean of {frames} noisy flats has pixels without signal; raise the exposure (mas) "
+                           "or the number of flats (flat_fields)")
+    return ratio
 
 
 def _bins(spectrum, detector: Detector, bin_tolerance: float) -> tuple[np.ndarray, np.ndarray, float]:

@@ -4,6 +4,11 @@
   distance z from the source casts a penumbra of ``spot · (SDD − z) / z`` on the detector, so the
   transmitted intensity is blurred by a Gaussian of that FWHM, z being one chosen plane
   (``focal_plane_mm``, default the rotation axis), before its photons are counted.
+* **Flat fields** (``flat_fields = N``): the flat that normalises every view is the mean of N noisy
+  open-beam exposures, one realisation per scan, instead of the exact (noise-free) flat.
+
+The flat's noise is drawn once per scan from the scan's seed, on a stream of its own
+(:func:`calibration_rng`) apart from the views' noise streams.
 """
 
 from __future__ import annotations
@@ -19,6 +24,10 @@ from ..core.geometry import as_vector_geometry
 
 FWHM_PER_SIGMA = 2 * math.sqrt(2 * math.log(2))  # a Gaussian's full width at half maximum over its σ
 
+# Seed-sequence word of the scan's fixed patterns. It is wider than 32 bits, so ``[seed, tag]``
+# becomes three words and never equals a view's ``[seed, view]`` stream.
+FLAT_TAG = int.from_bytes(b"flat fields", "big")
+
 
 @dataclass(frozen=True)
 class Realism:
@@ -27,10 +36,12 @@ class Realism:
     * ``focal_spot_mm``: FWHM of the Gaussian focal spot, mm (0: a point source).
     * ``focal_plane_mm``: distance from the source of the object plane whose magnification sets the
       blur, mm; None: the rotation axis (the plane through the origin parallel to the detector).
+    * ``flat_fields``: number of noisy flats averaged into the scan's flat; None: the exact flat.
     """
 
     focal_spot_mm: float = 0.0
     focal_plane_mm: float | None = None
+    flat_fields: int | None = None
 
     def __post_init__(self):
         for name in ("focal_spot_mm",):
@@ -44,14 +55,28 @@ class Realism:
             if not self.focal_spot_mm:
                 raise PhysicsError("realism focal_plane_mm needs focal_spot_mm > 0 "
                                    "(it sets where the spot's blur is exact)")
+        frames = self.flat_fields
+        if frames is not None and (isinstance(frames, bool) or not isinstance(frames, int) or frames < 1):
+            raise PhysicsError(f"realism flat_fields must be an integer >= 1 (or None for the exact flat), "
+                               f"got {frames!r}")
 
     @property
     def active(self) -> bool:
         """Whether any option is on (an ideal scanner otherwise)."""
         return self != Realism()
 
+    @property
+    def needs_seed(self) -> bool:
+        """Whether a fixed random pattern (the flats' noise) must be drawn."""
+        return self.flat_fields is not None
+
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
+
+
+def calibration_rng(seed: int, tag: int) -> np.random.Generator:
+    """The generator of one of the scan's fixed patterns (:data:`FLAT_TAG`)."""
+    return np.random.default_rng([int(seed), tag])
 
 
 def focal_sigma_px(geometry, view: int, spot_fwhm_mm: float, plane_mm: float | None = None) -> tuple[float, float]:
