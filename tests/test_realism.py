@@ -1,6 +1,7 @@
 """Scanner realism (xrayraster.physics.realism, docs/realism.md), each option against an independent
 expectation: the focal spot's edge against the erf of a Gaussian penumbra spot·(M − 1) and against
-sub-source sampling; the flats' noise against Poisson statistics."""
+sub-source sampling; the flats' noise against Poisson statistics; the gain map's line-integral
+offset against −ln g."""
 
 from __future__ import annotations
 
@@ -126,7 +127,7 @@ def test_focal_spot_needs_a_cone_beam_and_a_plane_before_the_detector(gl):
         Realism(focal_plane_mm=50.0)
 
 
-# ----------------------------------------------------------------------------- flat fields
+# ----------------------------------------------------------------------------- flat fields and gain
 
 OPEN = (96, 96)
 PHOTONS = 1e4  # per pixel: a parallel beam's 1 mm² pixels collect the fluence as is
@@ -180,6 +181,29 @@ def test_flat_fields_are_seeded_apart_from_the_views_and_the_same_for_any_subset
     assert not np.allclose(other[0], open_views(gl, realism, noise=False, seed=3).data[0])
 
 
+def test_gain_variation_offsets_every_view_by_minus_ln_g(gl):
+    """Noise-free: the raw signal over the ideal one is the gain map g (mean 1, relative std σ); the flat
+    leaves it in, so each line integral gains −ln g, the same in every view, of std √ln(1 + σ²) ≈ σ."""
+    sigma = 0.05
+    scene = xr.Scene()
+    scene.add(trimesh.creation.box((8.0, 8.0, 8.0)), AL)
+    geometry = xr.ConeBeamGeometry(100.0, 200.0, (64, 64), 0.4, xr.full_circle(2))
+    realism = Realism(gain_variation=sigma)
+    with xr.Renderer(geometry, context=gl) as r:
+        raw = [r.project(scene, MONO, v, output="raw", seed=1, realism=realism).image for v in range(2)]
+        ideal_raw = [r.project(scene, MONO, v, output="raw").image for v in range(2)]
+        line = [r.project(scene, MONO, v, seed=1, realism=realism).image for v in range(2)]
+        ideal = [r.project(scene, MONO, v).image for v in range(2)]
+    g = raw[0].astype(np.float64) / ideal_raw[0]
+    np.testing.assert_allclose(raw[1] / ideal_raw[1], g, rtol=1e-6)  # one map for the scan
+    for v in range(2):
+        np.testing.assert_allclose(line[v] - ideal[v], -np.log(g), atol=2e-6)
+    assert g.mean() == pytest.approx(1.0, abs=3 * sigma / 64)
+    assert g.std() == pytest.approx(sigma, rel=0.05)
+    assert np.log(g).std() == pytest.approx(math.sqrt(math.log1p(sigma**2)), rel=0.05)
+    assert math.sqrt(math.log1p(sigma**2)) == pytest.approx(sigma, rel=1e-3)
+
+
 # ----------------------------------------------------------------------------- configuration
 
 
@@ -209,9 +233,9 @@ mode = "counting"
 
 def test_realism_keys_are_read_from_source_and_detector(tmp_path):
     path = tmp_path / "scene.toml"
-    path.write_text(scene_text("focal_spot_mm = 0.05\nfocal_plane_mm = 90.0", "flat_fields = 8"))
+    path.write_text(scene_text("focal_spot_mm = 0.05\nfocal_plane_mm = 90.0", "flat_fields = 8\ngain_variation = 0.01"))
     loaded = load_scene_file(path)
-    assert loaded.realism == Realism(focal_spot_mm=0.05, focal_plane_mm=90.0, flat_fields=8)
+    assert loaded.realism == Realism(focal_spot_mm=0.05, focal_plane_mm=90.0, flat_fields=8, gain_variation=0.01)
     path.write_text(scene_text())
     assert load_scene_file(path).realism == Realism() and not Realism().active
 
@@ -224,6 +248,7 @@ def test_realism_keys_are_read_from_source_and_detector(tmp_path):
      r"focal_plane_mm \(200 mm from the source\) must lie before"),
     ("", "flat_fields = 0", "cone", r"\[detector\]: flat_fields must be an integer >= 1"),
     ("", "flat_fields = 2.5", "cone", r"\[detector\]: flat_fields must be an integer >= 1"),
+    ("", "gain_variation = -0.1", "cone", r"\[detector\]: gain_variation must be >= 0"),
 ])
 def test_realism_errors_name_the_key_and_the_fix(tmp_path, source, detector, beam, message):
     path = tmp_path / "scene.toml"

@@ -63,7 +63,7 @@ _SOURCE_KINDS = {  # the key that picks the kind → every key of that kind
     "spectrum_file": {"spectrum_file"},
 }
 _SOURCE_REALISM_KEYS = {"focal_spot_mm", "focal_plane_mm"}  # any source kind
-_DETECTOR_REALISM_KEYS = {"flat_fields"}
+_DETECTOR_REALISM_KEYS = {"flat_fields", "gain_variation"}
 _DETECTOR_KEYS = {"mode", "scintillator", "scintillator_mm", "blur_sigma_px", "electronic_noise", "dark",
                   *_DETECTOR_REALISM_KEYS}
 _MAX_SUBDIVISIONS = 8  # 1.3 million triangles
@@ -337,7 +337,7 @@ def _detector(spec: dict, materials: dict | None, where: str) -> Detector:
 
 def _realism(data: dict, geometry, path: Path) -> Realism:
     """The scanner's imperfections (docs/realism.md) from ``[source]`` (``focal_spot_mm``,
-    ``focal_plane_mm``) and ``[detector]`` (``flat_fields``); all off by default."""
+    ``focal_plane_mm``) and ``[detector]`` (``flat_fields``, ``gain_variation``); all off by default."""
     source, detector = data.get("source", {}), data.get("detector", {})
     where_source, where_detector = f"{path} [source]", f"{path} [detector]"
     options = {}
@@ -357,4 +357,7 @@ def _realism(data: dict, geometry, path: Path) -> Realism:
         options["focal_plane_mm"] = plane
     if "flat_fields" in detector:
         options["flat_fields"] = fields.integer(detector["flat_fields"], "flat_fields", where_detector, 1)
+    if "gain_variation" in detector:
+        options["gain_variation"] = fields.number(detector["gain_variation"], "gain_variation", where_detector,
+                                                  nonnegative=True)
     return Realism(**options)

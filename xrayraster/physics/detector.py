@@ -75,11 +75,14 @@ class Detector:
             return _convolve2d(image, np.asarray(self.psf))
         return gaussian_blur(image, self.blur_sigma_px, self.blur_sigma_px)
 
-    def read_out(self, signal: np.ndarray, rng, *, frames: int = 1) -> np.ndarray:
-        """Blur, dark offset and (with ``rng``) electronic noise: what the panel reports. ``frames``:
-        ``signal`` is the mean of that many exposures, whose read noises average to a standard
-        deviation of ``electronic_noise / sqrt(frames)``."""
-        out = self.blur(signal) + self.dark
+    def read_out(self, signal: np.ndarray, rng, *, gain=None, frames: int = 1) -> np.ndarray:
+        """Blur, per-pixel ``gain`` (a map, or None for 1), dark offset and (with ``rng``) electronic
+        noise: what the panel reports. ``frames``: ``signal`` is the mean of that many exposures,
+        whose read noises average to a standard deviation of ``electronic_noise / sqrt(frames)``."""
+        out = self.blur(signal)
+        if gain is not None:
+            out = out * gain
+        out = out + self.dark
         if rng is not None and self.electronic_noise > 0:
             out = out + rng.normal(0.0, self.electronic_noise / np.sqrt(frames), out.shape)
         return out

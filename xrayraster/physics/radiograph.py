@@ -4,7 +4,7 @@ The flat field is the noise-free signal with nothing in the beam (a scanner aver
 unless a scan's finite number of flats gives it noise (``flat_noise``), the dark field the
 detector's mean offset; ``transmission`` and ``lineint`` are normalised by them as a scanner does
 (:func:`xrayraster.physics.beer_lambert.normalise`). The scanner's imperfections (a focal spot,
-noisy flats) are modelled in :mod:`xrayraster.physics.realism`.
+noisy flats, an uncorrected gain map) are modelled in :mod:`xrayraster.physics.realism`.
 """
 
 from __future__ import annotations
@@ -54,7 +54,7 @@ BIN_TOLERANCE = 1e-6
 
 def radiograph(lengths, materials, spectrum, detector: Detector, factor, *, output="lineint", noise=False, rng=None,
                bin_tolerance: float = BIN_TOLERANCE, threads: int | None = None, focal_sigma_px=(0.0, 0.0),
-               flat_noise=None) -> Radiograph:
+               gain=None, flat_noise=None) -> Radiograph:
     """The radiograph of one view.
 
     ``lengths``: ``(channels, rows, cols)`` mm, channels in ``materials`` order; ``spectrum``:
@@ -64,8 +64,8 @@ def radiograph(lengths, materials, spectrum, detector: Detector, factor, *, outp
     ``bin_tolerance``: see :data:`BIN_TOLERANCE` (0 keeps every non-empty bin); ``threads``: of the
     spectral sum (default every core; :func:`~xrayraster.physics.beer_lambert.thread_count`).
     The scanner's imperfections (:mod:`~xrayraster.physics.realism`): ``focal_sigma_px``, the focal
-    spot's Gaussian blur ``(rows, cols)`` in pixels; ``flat_noise``, the scan's flat over the exact
-    one (:func:`flat_noise`).
+    spot's Gaussian blur ``(rows, cols)`` in pixels; ``gain``, a per-pixel gain map the flat does not
+    correct; ``flat_noise``, the scan's flat over the exact one (:func:`flat_noise`).
     """
     check_choice(output, RADIOGRAPH_OUTPUTS, "output", PhysicsError)
     if noise and rng is None:
@@ -74,7 +74,7 @@ def radiograph(lengths, materials, spectrum, detector: Detector, factor, *, outp
     mu = attenuation_table(materials, energies)
     quantum = _detected(lengths, mu, photons, energies, detector, factor, focal_sigma_px, rng if noise else None,
                         threads)
-    raw = detector.read_out(quantum, rng if noise else None)
+    raw = detector.read_out(quantum, rng if noise else None, gain=gain)
     if output == "raw":
         return Radiograph(raw.astype(np.float32), output, 0, len(energies), dropped)
     flat = _exact_flat(photons, energies, detector, factor, raw.shape, focal_sigma_px)

@@ -6,9 +6,12 @@
   (``focal_plane_mm``, default the rotation axis), before its photons are counted.
 * **Flat fields** (``flat_fields = N``): the flat that normalises every view is the mean of N noisy
   open-beam exposures, one realisation per scan, instead of the exact (noise-free) flat.
+* **Gain variation** (``gain_variation = σ``): a fixed per-pixel gain map g, mean 1 and relative
+  standard deviation σ, multiplies the signal and is not corrected by the (gain-free) flat: each line
+  integral gains −ln g(p), the same in every view, which reconstructs as rings.
 
-The flat's noise is drawn once per scan from the scan's seed, on a stream of its own
-(:func:`calibration_rng`) apart from the views' noise streams.
+The two fixed patterns (the flat's noise and the gain map) are drawn once per scan from the scan's
+seed, on streams of their own (:func:`calibration_rng`) apart from the views' noise streams.
 """
 
 from __future__ import annotations
@@ -24,9 +27,10 @@ from ..core.geometry import as_vector_geometry
 
 FWHM_PER_SIGMA = 2 * math.sqrt(2 * math.log(2))  # a Gaussian's full width at half maximum over its σ
 
-# Seed-sequence word of the scan's fixed patterns. It is wider than 32 bits, so ``[seed, tag]``
+# Seed-sequence words of the scan's fixed patterns. Each is wider than 32 bits, so ``[seed, tag]``
 # becomes three words and never equals a view's ``[seed, view]`` stream.
 FLAT_TAG = int.from_bytes(b"flat fields", "big")
+GAIN_TAG = int.from_bytes(b"gain map", "big")
 
 
 @dataclass(frozen=True)
@@ -37,14 +41,16 @@ class Realism:
     * ``focal_plane_mm``: distance from the source of the object plane whose magnification sets the
       blur, mm; None: the rotation axis (the plane through the origin parallel to the detector).
     * ``flat_fields``: number of noisy flats averaged into the scan's flat; None: the exact flat.
+    * ``gain_variation``: relative standard deviation of the per-pixel gain (0: uniform gain).
     """
 
     focal_spot_mm: float = 0.0
     focal_plane_mm: float | None = None
     flat_fields: int | None = None
+    gain_variation: float = 0.0
 
     def __post_init__(self):
-        for name in ("focal_spot_mm",):
+        for name in ("focal_spot_mm", "gain_variation"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
                 raise PhysicsError(f"realism {name} must be a finite number >= 0, got {value!r}")
@@ -67,15 +73,15 @@ class Realism:
 
     @property
     def needs_seed(self) -> bool:
-        """Whether a fixed random pattern (the flats' noise) must be drawn."""
-        return self.flat_fields is not None
+        """Whether a fixed random pattern (the flats' noise, the gain map) must be drawn."""
+        return self.flat_fields is not None or self.gain_variation > 0
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
 
 
 def calibration_rng(seed: int, tag: int) -> np.random.Generator:
-    """The generator of one of the scan's fixed patterns (:data:`FLAT_TAG`)."""
+    """The generator of one of the scan's fixed patterns (:data:`FLAT_TAG`, :data:`GAIN_TAG`)."""
     return np.random.default_rng([int(seed), tag])
 
 
@@ -98,6 +104,16 @@ def focal_sigma_px(geometry, view: int, spot_fwhm_mm: float, plane_mm: float | N
         raise PhysicsError(f"focal_plane_mm ({z:g} mm) must lie between the source and the detector ({sdd:g} mm away)")
     sigma_mm = spot_fwhm_mm / FWHM_PER_SIGMA * (sdd - z) / z
     return sigma_mm / float(np.linalg.norm(v)), sigma_mm / float(np.linalg.norm(u))
+
+
+def gain_map(sigma: float, shape: tuple[int, int], rng: np.random.Generator) -> np.ndarray:
+    """A per-pixel gain map ``shape`` (float64): log-normal with mean 1 and standard deviation ``sigma``.
+
+    ln g ~ Normal(−s²/2, s²) with s² = ln(1 + σ²), so every gain is positive and −ln g, the offset it
+    adds to a line integral, has standard deviation s (≈ σ for small σ: s = 0.0998 at σ = 0.1).
+    """
+    s2 = math.log1p(sigma * sigma)
+    return np.exp(rng.normal(-s2 / 2, math.sqrt(s2), shape))
 
 
 def scaled_poisson(mean: np.ndarray, variance: np.ndarray, rng: np.random.Generator) -> np.ndarray:

@@ -13,7 +13,7 @@ from ..gl.pathlengths import PathLengthRenderer
 from ..physics.beer_lambert import pixel_photon_factor, thread_count
 from ..physics.detector import Detector
 from ..physics.radiograph import Radiograph, flat_noise, radiograph
-from ..physics.realism import FLAT_TAG, Realism, calibration_rng, focal_sigma_px
+from ..physics.realism import FLAT_TAG, GAIN_TAG, Realism, calibration_rng, focal_sigma_px, gain_map
 from ..scene.scene import Scene
 
 
@@ -26,7 +26,7 @@ class Renderer(PathLengthRenderer):
 
     def __init__(self, geometry, *, threads: int | None = None, **options):
         self.threads = thread_count(threads)  # checked before a GL context is made
-        self._calibration = None  # (key, flat noise) of the last scan projected: see _fixed_patterns
+        self._calibration = None  # (key, gain map, flat noise) of the last scan projected: see _fixed_patterns
         super().__init__(geometry, **options)
 
     def project(self, scene: Scene, spectrum, view: int = 0, *, detector: Detector | None = None,
@@ -39,22 +39,23 @@ class Renderer(PathLengthRenderer):
         quantum and electronic noise are drawn from a generator seeded by ``(seed, view)``:
         the same seed gives the same bytes, and every view its own independent stream.
         ``realism``: the scanner's imperfections (:class:`~xrayraster.physics.realism.Realism`;
-        default none). Its fixed pattern, the flats' noise, is drawn from ``seed`` once for every view
-        (so it needs a seed even without ``noise``).
+        default none). Its fixed patterns, the flats' noise and the gain map, are drawn from ``seed``
+        once for every view (so they need a seed even without ``noise``).
         """
         realism = realism or Realism()
         if noise and seed is None:
             raise RenderError("noise=True needs a seed (an int), so the noise is reproducible")
         if realism.needs_seed and seed is None:
-            raise RenderError("flat_fields need a seed (an int): their noise is drawn from it")
+            raise RenderError("flat_fields and gain_variation need a seed (an int): their patterns are drawn from it")
         detector = detector or Detector()
         lengths = self.path_lengths(scene, view)
         view %= self.vector_geometry.num_views
         rng = np.random.default_rng([int(seed), view]) if noise else None
         factor = pixel_photon_factor(self.vector_geometry, view)
-        flat = self._fixed_patterns(spectrum, detector, realism, seed)
+        gain, flat = self._fixed_patterns(spectrum, detector, realism, seed)
         return radiograph(lengths, scene.materials, spectrum, detector, factor, output=output, noise=noise, rng=rng,
-                          threads=self.threads, focal_sigma_px=self._focal_sigma_px(realism, view), flat_noise=flat)
+                          threads=self.threads, focal_sigma_px=self._focal_sigma_px(realism, view), gain=gain,
+                          flat_noise=flat)
 
     def _focal_sigma_px(self, realism: Realism, view: int) -> tuple[float, float]:
         if not realism.focal_spot_mm:
@@ -62,18 +63,23 @@ class Renderer(PathLengthRenderer):
         return focal_sigma_px(self.vector_geometry, view, realism.focal_spot_mm, realism.focal_plane_mm)
 
     def _fixed_patterns(self, spectrum, detector: Detector, realism: Realism, seed):
-        """The scan's flat noise (None when off), drawn from ``seed`` on its own stream; the flats are
-        exposed in view 0's geometry. Kept for the next view of the same scan, as it is drawn from
-        the same stream every time: the bytes do not depend on the views asked."""
+        """The scan's gain map and flat noise (None when off), drawn from ``seed`` on their own streams;
+        the flats are exposed in view 0's geometry. Kept for the next view of the same scan, as
+        they are drawn from the same streams every time: the bytes do not depend on the views asked."""
         if not realism.needs_seed:
-            return None
+            return None, None
         key = (int(seed), spectrum, detector, realism)
         if self._calibration is None or self._calibration[0] != key:
-            flat = flat_noise(spectrum, detector, pixel_photon_factor(self.vector_geometry, 0),
-                              self.vector_geometry.detector_shape, realism.flat_fields, calibration_rng(seed, FLAT_TAG),
-                              focal_sigma_px=self._focal_sigma_px(realism, 0), threads=self.threads)
-            self._calibration = (key, flat)
-        return self._calibration[1]
+            shape = self.vector_geometry.detector_shape
+            gain = flat = None
+            if realism.gain_variation:
+                gain = gain_map(realism.gain_variation, shape, calibration_rng(seed, GAIN_TAG))
+            if realism.flat_fields is not None:
+                flat = flat_noise(spectrum, detector, pixel_photon_factor(self.vector_geometry, 0), shape,
+                                  realism.flat_fields, calibration_rng(seed, FLAT_TAG),
+                                  focal_sigma_px=self._focal_sigma_px(realism, 0), threads=self.threads)
+            self._calibration = (key, gain, flat)
+        return self._calibration[1:]
 
     # -- every view in one call ----------------------------------------------------------------
 
