@@ -233,9 +233,11 @@ mode = "counting"
 
 def test_realism_keys_are_read_from_source_and_detector(tmp_path):
     path = tmp_path / "scene.toml"
-    path.write_text(scene_text("focal_spot_mm = 0.05\nfocal_plane_mm = 90.0", "flat_fields = 8\ngain_variation = 0.01"))
+    path.write_text(scene_text("focal_spot_mm = 0.05\nfocal_plane_mm = 90.0", "flat_fields = 8\ngain_variation = 0.01\n"
+                               "psf = [[0, 1, 0], [1, 4, 1], [0, 1, 0]]"))
     loaded = load_scene_file(path)
     assert loaded.realism == Realism(focal_spot_mm=0.05, focal_plane_mm=90.0, flat_fields=8, gain_variation=0.01)
+    assert loaded.detector.psf[1] == (0.125, 0.5, 0.125)
     path.write_text(scene_text())
     assert load_scene_file(path).realism == Realism() and not Realism().active
 
@@ -249,6 +251,9 @@ def test_realism_keys_are_read_from_source_and_detector(tmp_path):
     ("", "flat_fields = 0", "cone", r"\[detector\]: flat_fields must be an integer >= 1"),
     ("", "flat_fields = 2.5", "cone", r"\[detector\]: flat_fields must be an integer >= 1"),
     ("", "gain_variation = -0.1", "cone", r"\[detector\]: gain_variation must be >= 0"),
+    ("", "psf = [[1, 1], [1, 1]]", "cone", r"\[detector\]: detector psf must be a 2-D kernel of odd size"),
+    ("", "psf = [[1, 1, 1], [1]]", "cone", r"\[detector\]: psf rows must all have the same length"),
+    ("", "psf = [[1]]\nblur_sigma_px = 1.0", "cone", r"give blur_sigma_px or psf, not both"),
 ])
 def test_realism_errors_name_the_key_and_the_fix(tmp_path, source, detector, beam, message):
     path = tmp_path / "scene.toml"

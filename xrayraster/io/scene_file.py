@@ -64,7 +64,7 @@ _SOURCE_KINDS = {  # the key that picks the kind → every key of that kind
 }
 _SOURCE_REALISM_KEYS = {"focal_spot_mm", "focal_plane_mm"}  # any source kind
 _DETECTOR_REALISM_KEYS = {"flat_fields", "gain_variation"}
-_DETECTOR_KEYS = {"mode", "scintillator", "scintillator_mm", "blur_sigma_px", "electronic_noise", "dark",
+_DETECTOR_KEYS = {"mode", "scintillator", "scintillator_mm", "blur_sigma_px", "psf", "electronic_noise", "dark",
                   *_DETECTOR_REALISM_KEYS}
 _MAX_SUBDIVISIONS = 8  # 1.3 million triangles
 _MAX_SECTIONS = 10_000
@@ -328,11 +328,22 @@ def _detector(spec: dict, materials: dict | None, where: str) -> Detector:
             scintillator=scintillator,
             scintillator_mm=thickness,
             blur_sigma_px=fields.number(spec.get("blur_sigma_px", 0.0), "blur_sigma_px", where, nonnegative=True),
+            psf=_psf(spec["psf"], where) if "psf" in spec else None,
             electronic_noise=fields.number(spec.get("electronic_noise", 0.0), "electronic_noise", where, nonnegative=True),
             dark=fields.number(spec.get("dark", 0.0), "dark", where, nonnegative=True),
         )
-    except PhysicsError as exc:  # pragma: no cover - every field is checked above
+    except PhysicsError as exc:  # the psf's shape and sum, and psf with blur_sigma_px
         raise ConfigError(f"{where}: {exc}") from None
+
+
+def _psf(value, where: str) -> tuple:
+    """The ``psf`` key: rows of numbers, an odd-sized 2-D kernel (the Detector checks shape and sum)."""
+    form = "an array of rows of numbers (an odd-sized 2-D kernel), e.g. [[0, 1, 0], [1, 4, 1], [0, 1, 0]]"
+    rows = fields.vector(value, "psf", where, None, form, element=lambda row, field, w: fields.vector(
+        row, field, w, None, form, element=fields.number, nonnegative=True))
+    if len({len(row) for row in rows}) != 1:
+        raise ConfigError(f"{where}: psf rows must all have the same length, got {[len(row) for row in rows]}")
+    return rows
 
 
 def _realism(data: dict, geometry, path: Path) -> Realism:
