@@ -1,7 +1,7 @@
 """Scanner realism (xrayraster.physics.realism, docs/realism.md), each option against an independent
 expectation: the focal spot's edge against the erf of a Gaussian penumbra spot·(M − 1) and against
 sub-source sampling; the flats' noise against Poisson statistics; the gain map's line-integral
-offset against −ln g."""
+offset against −ln g; the mount against box chords and the labels it must not have."""
 
 from __future__ import annotations
 
@@ -12,10 +12,12 @@ import pytest
 import trimesh
 
 import xrayraster as xr
+from references.chords import box_chord, cone_rays
 from xrayraster.core.errors import ConfigError, PhysicsError
 from xrayraster.io.scene_file import load_scene_file
 from xrayraster.physics.radiograph import radiograph
 from xrayraster.physics.realism import FWHM_PER_SIGMA, Realism
+from xrayraster.pipeline import load_scan_file
 
 AL = xr.Material.element("Al")
 
@@ -260,3 +262,100 @@ def test_realism_errors_name_the_key_and_the_fix(tmp_path, source, detector, bea
     path.write_text(scene_text(source, detector, beam))
     with pytest.raises(ConfigError, match=message):
         load_scene_file(path)
+
+
+# ----------------------------------------------------------------------------- mount
+
+SAMPLE_HALF = np.array([3.0, 3.0, 2.0])  # a 6 x 6 x 4 mm box on the axis
+MOUNT_CENTRE, MOUNT_HALF = np.array([0.0, 0.0, -4.5]), np.array([2.0, 2.0, 3.0])  # a post, z = -7.5 to 1 mm inside
+
+
+def scan_text(mount: str) -> str:
+    return f"""
+{mount}
+
+[[objects]]
+name = "sample"
+mesh = {{ box = {(2 * SAMPLE_HALF).tolist()} }}
+material = "aluminium"
+
+[source]
+monochromatic_kev = 30.0
+photons_per_mm2_at_1m = 1e6
+
+[geometry]
+source_to_origin = 60.0
+source_to_detector = 120.0
+detector_shape = [40, 32]
+pixel_size = 0.5
+num_views = 2
+
+[volume]
+shape = [40, 20, 20]
+voxel_size = 0.5
+offset = [-2.0, 0.0, 0.0]
+"""
+
+
+MOUNT = f"""
+[[mount]]
+name = "post"
+mesh = {{ box = {(2 * MOUNT_HALF).tolist()} }}
+material = "pmma"
+translate = {MOUNT_CENTRE.tolist()}
+"""
+
+
+def test_the_mount_is_projected_never_labelled_and_gives_way_to_the_sample(gl, tmp_path):
+    path = tmp_path / "scan.toml"
+    path.write_text(scan_text(MOUNT))
+    loaded = load_scan_file(path)
+    sample = loaded.sample_scene()
+    scanned = loaded.with_mount(sample)
+    assert [o.name for o in sample.objects] == ["sample"] and [o.name for o in scanned.objects] == ["sample", "post"]
+    with xr.Renderer(loaded.geometry, context=gl) as r:
+        lengths = r.path_lengths(scanned, 0)
+        alone = r.path_lengths(sample, 0)
+        mounted = r.project(scanned, loaded.spectrum).image
+        bare = r.project(sample, loaded.spectrum).image
+    origins, dirs = cone_rays(60.0, 120.0, (40, 32), 0.5, 0.0)
+    chord = lambda centre, half: box_chord(origins, dirs, np.asarray(centre), np.eye(3), np.asarray(half))  # noqa: E731
+    overlap_lo = np.maximum(-SAMPLE_HALF, MOUNT_CENTRE - MOUNT_HALF)
+    overlap_hi = np.minimum(SAMPLE_HALF, MOUNT_CENTRE + MOUNT_HALF)
+    overlap = chord((overlap_lo + overlap_hi) / 2, (overlap_hi - overlap_lo) / 2)
+    np.testing.assert_allclose(lengths[0], chord(np.zeros(3), SAMPLE_HALF), atol=2e-4)  # the sample whole
+    np.testing.assert_allclose(lengths[1], chord(MOUNT_CENTRE, MOUNT_HALF) - overlap, atol=2e-4)  # the post gives way
+    np.testing.assert_allclose(alone[0], lengths[0], atol=1e-5)  # summed alone, resolved with the post
+    changed = np.abs(mounted - bare) > 1e-6
+    assert np.all(changed[lengths[1] > 1e-3]) and not changed[lengths[1] == 0].any() and changed.sum() > 100
+
+    labels = xr.voxelize(sample, loaded.volume, context=gl).data
+    z, y, x = np.meshgrid(*(np.arange(n) - (n - 1) / 2 for n in loaded.volume.shape), indexing="ij")
+    centres = np.stack([x * 0.5, y * 0.5, z * 0.5 - 2.0], axis=-1)
+    in_sample = np.all(np.abs(centres) < SAMPLE_HALF - 0.01, axis=-1)
+    in_post = np.all(np.abs(centres - MOUNT_CENTRE) < MOUNT_HALF - 0.01, axis=-1) & ~np.all(
+        np.abs(centres) < SAMPLE_HALF + 0.01, axis=-1)
+    assert in_post.sum() > 100 and not labels[in_post].any()
+    assert np.all(labels[in_sample] == 1)
+
+
+@pytest.mark.parametrize("mount, message", [
+    (MOUNT.replace('name = "post"', 'name = "post"\nlabel = 4'), r"\[\[mount\]\] #1: label does not apply to a mount"),
+    (MOUNT.replace('name = "post"', 'name = "post"\npriority = 4'), r"priority does not apply to a mount"),
+    (MOUNT.replace('"post"', '"sample"'), r"\[\[mount\]\] #1: name 'sample' is taken by an \[\[objects\]\] entry"),
+    (MOUNT.replace('"pmma"', '"unobtainium"'), r"\[\[mount\]\] #1 \(post\): material 'unobtainium' is not defined"),
+    ("mount = 3", r"mount must be a non-empty array of tables"),
+])
+def test_mount_errors_name_the_table_and_the_fix(tmp_path, mount, message):
+    path = tmp_path / "scan.toml"
+    path.write_text(scan_text(mount))
+    with pytest.raises(ConfigError, match=message):
+        load_scan_file(path)
+
+
+def test_no_mount_leaves_the_sample_as_it_is(tmp_path):
+    path = tmp_path / "scan.toml"
+    path.write_text(scan_text(""))
+    loaded = load_scan_file(path)
+    sample = loaded.sample_scene()
+    assert loaded.mount is None and loaded.with_mount(sample) is sample and loaded.realism == Realism()
