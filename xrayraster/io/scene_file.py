@@ -29,6 +29,7 @@ from ..core.errors import (
 from ..core.geometry import ConeBeamGeometry, ParallelBeamGeometry, geometry_from_dict
 from ..core.transform import Transform
 from ..physics.detector import Detector
+from ..physics.realism import Realism
 from ..physics.spectrum import Spectrum
 from ..scene.material_library import library_key
 from ..scene.materials import ENERGY_MAX_KEV, ENERGY_MIN_KEV, Material
@@ -40,7 +41,8 @@ class SceneFile:
     """A loaded scene file. ``materials`` ({NAME: Material}): the ``[materials]`` table and the
     library materials the objects use by name; None when the file has no ``[materials]`` and some
     object's material is neither (then only path lengths can be rendered). ``spectrum`` and
-    ``detector`` are None when the file has no ``[source]`` or ``[detector]`` table."""
+    ``detector`` are None when the file has no ``[source]`` or ``[detector]`` table; ``realism``
+    holds the scanner's imperfections those tables ask for (docs/realism.md)."""
 
     path: Path
     geometry: ConeBeamGeometry | ParallelBeamGeometry
@@ -48,6 +50,7 @@ class SceneFile:
     materials: dict | None = None
     spectrum: Spectrum | None = None
     detector: Detector | None = None
+    realism: Realism = Realism()
 
 
 _OBJECT_KEYS = {"name", "mesh", "material", "label", "priority", "unit_scale", "translate", "rotate_deg"}
@@ -59,7 +62,10 @@ _SOURCE_KINDS = {  # the key that picks the kind → every key of that kind
     "monochromatic_kev": {"monochromatic_kev", "photons_per_mm2_at_1m"},
     "spectrum_file": {"spectrum_file"},
 }
-_DETECTOR_KEYS = {"mode", "scintillator", "scintillator_mm", "blur_sigma_px", "electronic_noise", "dark"}
+_SOURCE_REALISM_KEYS = {"focal_spot_mm", "focal_plane_mm"}  # any source kind
+_DETECTOR_REALISM_KEYS = {"flat_fields", "gain_variation"}
+_DETECTOR_KEYS = {"mode", "scintillator", "scintillator_mm", "blur_sigma_px", "psf", "electronic_noise", "dark",
+                  *_DETECTOR_REALISM_KEYS}
 _MAX_SUBDIVISIONS = 8  # 1.3 million triangles
 _MAX_SECTIONS = 10_000
 
@@ -106,7 +112,7 @@ def load_scene_file(path) -> SceneFile:
     detector = None
     if "detector" in data:
         detector = _detector(fields.table(data["detector"], "detector", f"{path}"), materials, f"{path} [detector]")
-    return SceneFile(path, geometry, scene, materials, spectrum, detector)
+    return SceneFile(path, geometry, scene, materials, spectrum, detector, _realism(data, geometry, path))
 
 
 def _add_object(scene: Scene, spec: dict, base: Path, where: str, materials: dict | None = None,
@@ -246,7 +252,7 @@ def _material(spec, name: str, where: str) -> Material:
 
 
 def _source(src: dict, base: Path, where: str) -> Spectrum:
-    fields.only(src, set().union(*_SOURCE_KINDS.values()), where)
+    fields.only(src, set().union(*_SOURCE_KINDS.values(), _SOURCE_REALISM_KEYS), where)
     kinds = [k for k in _SOURCE_KINDS if k in src]
     if len(kinds) != 1:
         given = f"got {' and '.join(kinds)}" if kinds else "got none"
@@ -254,7 +260,7 @@ def _source(src: dict, base: Path, where: str) -> Spectrum:
             f"{where}: give exactly one source kind: kvp (an X-ray tube), monochromatic_kev, or spectrum_file ({given})"
         )
     kind = kinds[0]
-    stray = sorted(set(src) - _SOURCE_KINDS[kind])
+    stray = sorted(set(src) - _SOURCE_KINDS[kind] - _SOURCE_REALISM_KEYS)
     if stray:
         raise ConfigError(
             f"{where}: {', '.join(stray)} do(es) not apply to a {kind} source; "
@@ -322,8 +328,47 @@ def _detector(spec: dict, materials: dict | None, where: str) -> Detector:
             scintillator=scintillator,
             scintillator_mm=thickness,
             blur_sigma_px=fields.number(spec.get("blur_sigma_px", 0.0), "blur_sigma_px", where, nonnegative=True),
+            psf=_psf(spec["psf"], where) if "psf" in spec else None,
             electronic_noise=fields.number(spec.get("electronic_noise", 0.0), "electronic_noise", where, nonnegative=True),
             dark=fields.number(spec.get("dark", 0.0), "dark", where, nonnegative=True),
         )
-    except PhysicsError as exc:  # pragma: no cover - every field is checked above
+    except PhysicsError as exc:  # the psf's shape and sum, and psf with blur_sigma_px
         raise ConfigError(f"{where}: {exc}") from None
+
+
+def _psf(value, where: str) -> tuple:
+    """The ``psf`` key: rows of numbers, an odd-sized 2-D kernel (the Detector checks shape and sum)."""
+    form = "an array of rows of numbers (an odd-sized 2-D kernel), e.g. [[0, 1, 0], [1, 4, 1], [0, 1, 0]]"
+    rows = fields.vector(value, "psf", where, None, form, element=lambda row, field, w: fields.vector(
+        row, field, w, None, form, element=fields.number, nonnegative=True))
+    if len({len(row) for row in rows}) != 1:
+        raise ConfigError(f"{where}: psf rows must all have the same length, got {[len(row) for row in rows]}")
+    return rows
+
+
+def _realism(data: dict, geometry, path: Path) -> Realism:
+    """The scanner's imperfections (docs/realism.md) from ``[source]`` (``focal_spot_mm``,
+    ``focal_plane_mm``) and ``[detector]`` (``flat_fields``, ``gain_variation``); all off by default."""
+    source, detector = data.get("source", {}), data.get("detector", {})
+    where_source, where_detector = f"{path} [source]", f"{path} [detector]"
+    options = {}
+    if "focal_spot_mm" in source:
+        options["focal_spot_mm"] = fields.number(source["focal_spot_mm"], "focal_spot_mm", where_source,
+                                                 nonnegative=True)
+        if options["focal_spot_mm"] and geometry.beam != "cone":
+            raise ConfigError(f"{where_source}: focal_spot_mm applies to cone-beam scans; a parallel beam has no "
+                              "source point (remove it, or use beam = \"cone\")")
+    if "focal_plane_mm" in source:
+        plane = fields.number(source["focal_plane_mm"], "focal_plane_mm", where_source, positive=True)
+        if not options.get("focal_spot_mm"):
+            raise ConfigError(f"{where_source}: focal_plane_mm needs focal_spot_mm > 0 (the spot whose blur it places)")
+        if plane >= geometry.source_to_detector:
+            raise ConfigError(f"{where_source}: focal_plane_mm ({plane:g} mm from the source) must lie before the "
+                              f"detector (source_to_detector = {geometry.source_to_detector:g} mm)")
+        options["focal_plane_mm"] = plane
+    if "flat_fields" in detector:
+        options["flat_fields"] = fields.integer(detector["flat_fields"], "flat_fields", where_detector, 1)
+    if "gain_variation" in detector:
+        options["gain_variation"] = fields.number(detector["gain_variation"], "gain_variation", where_detector,
+                                                  nonnegative=True)
+    return Realism(**options)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -72,20 +73,42 @@ class Detector:
         """The point-spread applied to ``image`` (edges extended); unchanged without blur."""
         if self.psf is not None:
             return _convolve2d(image, np.asarray(self.psf))
-        if self.blur_sigma_px == 0:
-            return image
-        radius = max(1, int(np.ceil(4 * self.blur_sigma_px)))
-        x = np.arange(-radius, radius + 1)
-        g = np.exp(-0.5 * (x / self.blur_sigma_px) ** 2)
-        g /= g.sum()
-        return _convolve2d(_convolve2d(image, g[None, :]), g[:, None])  # separable
+        return gaussian_blur(image, self.blur_sigma_px, self.blur_sigma_px)
 
-    def read_out(self, signal: np.ndarray, rng) -> np.ndarray:
-        """Blur, dark offset and (with ``rng``) electronic noise: what the panel reports."""
-        out = self.blur(signal) + self.dark
+    def read_out(self, signal: np.ndarray, rng, *, gain=None, frames: int = 1) -> np.ndarray:
+        """Blur, per-pixel ``gain`` (a map, or None for 1), dark offset and (with ``rng``) electronic
+        noise: what the panel reports. ``frames``: ``signal`` is the mean of that many exposures,
+        whose read noises average to a standard deviation of ``electronic_noise / sqrt(frames)``."""
+        out = self.blur(signal)
+        if gain is not None:
+            out = out * gain
+        out = out + self.dark
         if rng is not None and self.electronic_noise > 0:
-            out = out + rng.normal(0.0, self.electronic_noise, out.shape)
+            out = out + rng.normal(0.0, self.electronic_noise / np.sqrt(frames), out.shape)
         return out
+
+
+def gaussian_blur(image: np.ndarray, sigma_rows_px: float, sigma_cols_px: float, *, pixel_averaged: bool = False
+                  ) -> np.ndarray:
+    """``image`` convolved with a Gaussian of these standard deviations (pixels; 0: none along that
+    axis), edges extended; ``image`` itself when both are 0. The kernel spans ±4σ and sums to 1: the
+    Gaussian sampled at whole pixels, or with ``pixel_averaged`` its mean over each pixel's width
+    (differences of its CDF), which blurs an image of pixel-wide steps exactly at any σ, also below
+    a pixel, where the sampled kernel is coarse."""
+    out = image
+    for sigma, axis in ((sigma_cols_px, 1), (sigma_rows_px, 0)):  # separable
+        if sigma == 0:
+            continue
+        radius = max(1, int(np.ceil(4 * sigma)))
+        x = np.arange(-radius, radius + 1)
+        if pixel_averaged:
+            cdf = np.array([math.erf(edge / (sigma * math.sqrt(2))) for edge in np.append(x - 0.5, radius + 0.5)])
+            g = np.diff(cdf)
+        else:
+            g = np.exp(-0.5 * (x / sigma) ** 2)
+        g /= g.sum()
+        out = _convolve2d(out, g[None, :] if axis == 1 else g[:, None])
+    return out
 
 
 def _convolve2d(image: np.ndarray, kernel: np.ndarray) -> np.ndarray:

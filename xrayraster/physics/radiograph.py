@@ -1,8 +1,10 @@
 """One radiograph from per-material path lengths: spectrum × materials × detector (+ noise).
 
-The flat field is the noise-free signal with nothing in the beam (a scanner averages many flats),
-the dark field the detector's mean offset; ``transmission`` and ``lineint`` are normalised by
-them as a scanner does (:func:`xrayraster.physics.beer_lambert.normalise`).
+The flat field is the noise-free signal with nothing in the beam (a scanner averages many flats)
+unless a scan's finite number of flats gives it noise (``flat_noise``), the dark field the
+detector's mean offset; ``transmission`` and ``lineint`` are normalised by them as a scanner does
+(:func:`xrayraster.physics.beer_lambert.normalise`). The scanner's imperfections (a focal spot,
+noisy flats, an uncorrected gain map) are modelled in :mod:`xrayraster.physics.realism`.
 """
 
 from __future__ import annotations
@@ -14,7 +16,8 @@ import numpy as np
 from ..core.choices import RADIOGRAPH_OUTPUTS, check_choice
 from ..core.errors import PhysicsError
 from . import beer_lambert
-from .detector import Detector
+from .detector import Detector, gaussian_blur
+from .realism import scaled_poisson
 
 
 @dataclass(frozen=True)
@@ -50,7 +53,8 @@ BIN_TOLERANCE = 1e-6
 
 
 def radiograph(lengths, materials, spectrum, detector: Detector, factor, *, output="lineint", noise=False, rng=None,
-               bin_tolerance: float = BIN_TOLERANCE, threads: int | None = None) -> Radiograph:
+               bin_tolerance: float = BIN_TOLERANCE, threads: int | None = None, focal_sigma_px=(0.0, 0.0),
+               gain=None, flat_noise=None) -> Radiograph:
     """The radiograph of one view.
 
     ``lengths``: ``(channels, rows, cols)`` mm, channels in ``materials`` order; ``spectrum``:
@@ -59,24 +63,24 @@ def radiograph(lengths, materials, spectrum, detector: Detector, factor, *, outp
     (and the detector's electronic noise) from ``rng`` (a ``numpy.random.Generator``);
     ``bin_tolerance``: see :data:`BIN_TOLERANCE` (0 keeps every non-empty bin); ``threads``: of the
     spectral sum (default every core; :func:`~xrayraster.physics.beer_lambert.thread_count`).
+    The scanner's imperfections (:mod:`~xrayraster.physics.realism`): ``focal_sigma_px``, the focal
+    spot's Gaussian blur ``(rows, cols)`` in pixels; ``gain``, a per-pixel gain map the flat does not
+    correct; ``flat_noise``, the scan's flat over the exact one (:func:`flat_noise`).
     """
     check_choice(output, RADIOGRAPH_OUTPUTS, "output", PhysicsError)
     if noise and rng is None:
         raise PhysicsError("noise=True needs rng (a numpy.random.Generator, e.g. np.random.default_rng(seed))")
-    keep, dropped = spectrum.trim_mask(bin_tolerance, detector.weights(spectrum.energies))
-    energies = spectrum.energies[keep]
-    photons = spectrum.fluence[keep]
+    energies, photons, dropped = _bins(spectrum, detector, bin_tolerance)
     mu = attenuation_table(materials, energies)
-    weights = detector.weights(energies)
-    if noise:
-        quantum = beer_lambert.sampled_signal(lengths, mu, photons, detector.efficiency(energies), energies, factor,
-                                              detector.counting, rng, threads)
-    else:
-        quantum = beer_lambert.expected_signal(lengths, mu, photons, weights, factor, threads)
-    raw = detector.read_out(quantum, rng if noise else None)
+    quantum = _detected(lengths, mu, photons, energies, detector, factor, focal_sigma_px, rng if noise else None,
+                        threads)
+    raw = detector.read_out(quantum, rng if noise else None, gain=gain)
     if output == "raw":
         return Radiograph(raw.astype(np.float32), output, 0, len(energies), dropped)
-    flat = detector.blur(np.broadcast_to((photons * weights).sum() * np.asarray(factor, dtype=np.float64), raw.shape)) + detector.dark
+    flat = _exact_flat(photons, energies, detector, factor, raw.shape, focal_sigma_px)
+    if flat_noise is not None:
+        flat = detector.dark + (flat - detector.dark) * flat_noise
+    weights = detector.weights(energies)
     floor = 0.5 * float((photons * weights).sum() / photons.sum())  # half a mean detected photon
     normalised = beer_lambert.normalise(raw, flat, detector.dark, floor)
     image = (normalised.transmission if output == "transmission" else normalised.line_integral).astype(np.float32)
@@ -87,3 +91,65 @@ def radiograph(lengths, materials, spectrum, detector: Detector, factor, *, outp
         clamped = np.asarray(raw, dtype=np.float64) - detector.dark <= 0  # counted by normalise already
         starved += int(np.count_nonzero((image == 0) & ~clamped))
     return Radiograph(image, output, starved, len(energies), dropped)
+
+
+def flat_noise(spectrum, detector: Detector, factor, shape: tuple[int, int], frames: int, rng, *,
+               focal_sigma_px=(0.0, 0.0), bin_tolerance: float = BIN_TOLERANCE,
+               threads: int | None = None) -> np.ndarray:
+    """A scan's flat from ``frames`` noisy open-beam exposures, as a factor on the exact flat:
+    ``(flat − dark) / (exact flat − dark)`` per pixel, float64 ``shape``.
+
+    The flats' mean is drawn in one go: the sum of ``frames`` independent exposures is one exposure
+    of ``frames`` times the photons, and their read noises average to ``electronic_noise / √frames``.
+    """
+    energies, photons, _ = _bins(spectrum, detector, bin_tolerance)
+    open_beam = np.zeros((1, *shape), np.float32), np.zeros((1, len(energies)))  # no path length, no μ
+    exposed = _detected(*open_beam, photons, energies, detector, frames * np.asarray(factor, dtype=np.float64),
+                        focal_sigma_px, rng, threads) / frames
+    flat = detector.read_out(exposed, rng, frames=frames) - detector.dark
+    ratio = flat / (_exact_flat(photons, energies, detector, factor, shape, focal_sigma_px) - detector.dark)
+    if np.any(ratio <= 0):
+        raise PhysicsError(f"the mean of {frames} noisy flats has pixels without signal; raise the exposure (mas) "
+                           "or the number of flats (flat_fields)")
+    return ratio
+
+
+def _bins(spectrum, detector: Detector, bin_tolerance: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """The energy bins kept (:data:`BIN_TOLERANCE`): energies keV, photons, and the signal share dropped."""
+    keep, dropped = spectrum.trim_mask(bin_tolerance, detector.weights(spectrum.energies))
+    return spectrum.energies[keep], spectrum.fluence[keep], dropped
+
+
+def _detected(lengths, mu, photons, energies, detector: Detector, factor, focal_sigma_px, rng, threads) -> np.ndarray:
+    """The detected signal before read-out: expected (``rng`` None) or one noisy realisation.
+
+    A focal spot blurs the transmitted intensity before its photons are counted, so the blurred
+    mean (and, integrating, the blurred variance Σ E²·η·n) is drawn from: a Poisson count (counting)
+    or :func:`~xrayraster.physics.realism.scaled_poisson`. Without one, Beer–Lambert's own sampling.
+    """
+    weights = detector.weights(energies)
+    if not any(focal_sigma_px):
+        if rng is None:
+            return beer_lambert.expected_signal(lengths, mu, photons, weights, factor, threads)
+        return beer_lambert.sampled_signal(lengths, mu, photons, detector.efficiency(energies), energies, factor,
+                                           detector.counting, rng, threads)
+    mean = _focal_blur(beer_lambert.expected_signal(lengths, mu, photons, weights, factor, threads), *focal_sigma_px)
+    if rng is None:
+        return mean
+    if detector.counting:
+        return rng.poisson(mean).astype(np.float64)
+    variance = beer_lambert.expected_signal(lengths, mu, photons, energies * weights, factor, threads)
+    return scaled_poisson(mean, _focal_blur(variance, *focal_sigma_px), rng)
+
+
+def _focal_blur(image: np.ndarray, sigma_rows_px: float, sigma_cols_px: float) -> np.ndarray:
+    """The focal spot's Gaussian averaged over each pixel: exact on the pixel-sharp edges of a view
+    at any width (docs/realism.md measures it against sub-source sampling)."""
+    return gaussian_blur(image, sigma_rows_px, sigma_cols_px, pixel_averaged=True)
+
+
+def _exact_flat(photons, energies, detector: Detector, factor, shape, focal_sigma_px) -> np.ndarray:
+    """The noise-free flat (dark included): the open beam, blurred as the views are."""
+    open_beam = np.broadcast_to((photons * detector.weights(energies)).sum() * np.asarray(factor, dtype=np.float64),
+                                shape)
+    return detector.blur(_focal_blur(open_beam, *focal_sigma_px)) + detector.dark

@@ -4,7 +4,11 @@ The tables are the scene file's (docs/scene-format.md), read by its parsers, wit
 either as ``[[objects]]`` or as a ``[weave]`` table (docs/weave.md, read by the weave file's
 parser; ``[materials.NAME]`` serve both), and two more: ``[volume]``, the reconstruction grid in
 the dict form of :class:`~xrayraster.core.volume.VolumeGeometry`, and ``[scan]``, the options
-(:class:`ScanOptions`). ``[source]`` is required (a scan makes radiographs). A weave sample's
+(:class:`ScanOptions`). ``[source]`` is required (a scan makes radiographs). ``[[mount]]`` tables
+(the keys of ``[[objects]]`` but ``label`` and ``priority``) add objects that are scanned but never
+labelled, such as a sample holder: they are in the projections, not in the labels, and the sample owns
+any space it shares with them. The scanner's imperfections (docs/realism.md) are keys of ``[source]``
+and ``[detector]``, as in scene files. A weave sample's
 ``[geometry]`` defaults to the framing scan ``xrayraster weave`` writes, and the sample is placed
 as there: its box centred on the rotation axis, its thickness along z. The default ``[volume]`` is
 the grid over the sample's box (the objects' bounds) at the scan's magnified pixel pitch. Every
@@ -25,9 +29,10 @@ from ..core.errors import ConfigError
 from ..core.geometry import ConeBeamGeometry, ParallelBeamGeometry
 from ..core.transform import Transform
 from ..core.volume import VolumeGeometry
-from ..io.scene_file import _add_object, _detector, _geometry, _materials, _source, read_toml
+from ..io.scene_file import _OBJECT_KEYS, _add_object, _detector, _geometry, _materials, _realism, _source, read_toml
 from ..io.weave_file import WeaveFile, framing_geometry, sample_grid, weave_from_dict
 from ..physics.detector import Detector
+from ..physics.realism import Realism
 from ..physics.spectrum import Spectrum
 from ..scene.materials import Material
 from ..scene.scene import Scene
@@ -35,7 +40,7 @@ from ..weave.tessellation import resolution_for
 
 __all__ = ["ScanFile", "ScanOptions", "load_scan_file", "mesh_resolution_for"]
 
-_TABLES = {"geometry", "objects", "weave", "materials", "source", "detector", "volume", "scan"}
+_TABLES = {"geometry", "objects", "weave", "mount", "materials", "source", "detector", "volume", "scan"}
 
 
 @dataclass(frozen=True)
@@ -77,7 +82,9 @@ class ScanOptions:
 class ScanFile:
     """A loaded scan file. The sample is ``scene`` (from ``[[objects]]``) or ``weave`` (from
     ``[weave]``, meshed by :meth:`sample_scene`); the other is None. ``box_mm``: the sample's
-    ``(2, 3)`` min/max corners in the scanner frame (a weave's as placed there)."""
+    ``(2, 3)`` min/max corners in the scanner frame (a weave's as placed there). ``realism``: the
+    scanner's imperfections; ``mount``: the ``[[mount]]`` objects (None without), which
+    :meth:`with_mount` adds to the sample for the projections."""
 
     path: Path
     scene: Scene | None
@@ -89,6 +96,8 @@ class ScanFile:
     detector: Detector | None
     options: ScanOptions
     mesh_resolution: dict | None = None  # a weave's knobs, and whether the grid chose them (mesh_resolution_for)
+    realism: Realism = Realism()
+    mount: Scene | None = None
 
     def sample_scene(self, progress: bool = False) -> Scene:
         """The scene to scan: the objects, or the weave meshed and moved so its box is centred on the axis."""
@@ -97,6 +106,21 @@ class ScanFile:
         lo, hi = self.weave.sample.box
         return self.weave.sample.scene(self.weave.materials, transform=Transform.translation(-(lo + hi) / 2),
                                        progress=progress)
+
+    def with_mount(self, sample: Scene) -> Scene:
+        """What the projections see: ``sample`` (from :meth:`sample_scene`, which the labels are made
+        from) and then the mount, below every sample object (priority: the sample's lowest minus 1),
+        so the sample owns any space they share and the labels stay the sample's. ``sample`` itself
+        when the file has no mount."""
+        if self.mount is None:
+            return sample
+        scene = Scene()
+        for o in sample.objects:
+            scene.add(o.mesh, o.material, label=o.label, priority=o.priority, name=o.name)
+        below = min(o.priority for o in sample.objects) - 1
+        for o in self.mount.objects:
+            scene.add(o.mesh, o.material, priority=below, name=o.name)
+        return scene
 
     @property
     def weave_report(self) -> dict | None:
@@ -140,6 +164,9 @@ def load_scan_file(path) -> ScanFile:
             raise ConfigError(f"{path}: missing [geometry] table (needed with [[objects]]; a [weave] sample frames itself)")
         scene, materials = _objects(data["objects"], path, materials)
         box = scene.bounds
+    mount = None
+    if "mount" in data:
+        mount, materials = _mount(data["mount"], path, materials, scene)
     spectrum = _source(fields.table(data["source"], "source", f"{path}"), path.parent, f"{path} [source]")
     detector = None
     if "detector" in data:
@@ -153,7 +180,7 @@ def load_scan_file(path) -> ScanFile:
                  for k in ("points_per_section", "samples_per_mm")}
         weave, resolution = mesh_resolution_for(weave, volume, options.mesh_tolerance_voxels, given)
     return ScanFile(path, scene, weave, np.asarray(box, dtype=np.float64), geometry, volume, spectrum, detector,
-                    options, resolution)
+                    options, resolution, _realism(data, geometry, path), mount)
 
 
 def mesh_resolution_for(weave: WeaveFile, volume: VolumeGeometry, tolerance_voxels: float,
@@ -181,4 +208,29 @@ def _objects(objects, path: Path, materials: dict | None) -> tuple[Scene, dict]:
     for k, spec in enumerate(objects):
         where = f"{path} [[objects]] #{k + 1}"
         _add_object(scene, fields.table(spec, "objects", where), path.parent, where, materials or {}, library)
+    return scene, {**library, **(materials or {})}
+
+
+def _mount(mounts, path: Path, materials: dict | None, sample: Scene | None) -> tuple[Scene, dict]:
+    """The ``[[mount]]`` tables: objects as in ``[[objects]]``, without a label or a priority (a
+    mount is never labelled, and the sample owns any space it shares with one). Named ``mountK``
+    unless named; a name an ``[[objects]]`` entry has is an error."""
+    if not isinstance(mounts, list) or not mounts:
+        raise ConfigError(f"{path}: mount must be a non-empty array of tables ([[mount]]), got {mounts!r}")
+    scene = Scene()
+    library: dict[str, Material] = {}
+    taken = {o.name for o in sample.objects} if sample is not None else set()
+    for k, spec in enumerate(mounts):
+        where = f"{path} [[mount]] #{k + 1}"
+        spec = fields.table(spec, "mount", where)
+        for key, why in (("label", "a mount is never labelled (it is background, 0, in the labels)"),
+                         ("priority", "the sample owns any space it shares with a mount")):
+            if key in spec:
+                raise ConfigError(f"{where}: {key} does not apply to a mount: {why}; remove it")
+        fields.only(spec, _OBJECT_KEYS - {"label", "priority"}, where)
+        spec = {"name": f"mount{k + 1}", **spec}
+        if spec["name"] in taken:
+            raise ConfigError(f"{where}: name {spec['name']!r} is taken by an [[objects]] entry; give the mount "
+                              "another name")
+        _add_object(scene, spec, path.parent, where, materials or {}, library)
     return scene, {**library, **(materials or {})}

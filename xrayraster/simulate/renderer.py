@@ -12,7 +12,8 @@ from ..core.projections import Projections
 from ..gl.pathlengths import PathLengthRenderer
 from ..physics.beer_lambert import pixel_photon_factor, thread_count
 from ..physics.detector import Detector
-from ..physics.radiograph import Radiograph, radiograph
+from ..physics.radiograph import Radiograph, flat_noise, radiograph
+from ..physics.realism import FLAT_TAG, GAIN_TAG, Realism, calibration_rng, focal_sigma_px, gain_map
 from ..scene.scene import Scene
 
 
@@ -25,25 +26,60 @@ class Renderer(PathLengthRenderer):
 
     def __init__(self, geometry, *, threads: int | None = None, **options):
         self.threads = thread_count(threads)  # checked before a GL context is made
+        self._calibration = None  # (key, gain map, flat noise) of the last scan projected: see _fixed_patterns
         super().__init__(geometry, **options)
 
     def project(self, scene: Scene, spectrum, view: int = 0, *, detector: Detector | None = None,
-                output: str = "lineint", noise: bool = False, seed: int | None = None) -> Radiograph:
+                output: str = "lineint", noise: bool = False, seed: int | None = None,
+                realism: Realism | None = None) -> Radiograph:
         """The radiograph of one view (:class:`~xrayraster.physics.radiograph.Radiograph`).
 
         Scene materials must be :class:`~xrayraster.Material` objects. ``output``: ``"raw"``
         (detector signal), ``"transmission"`` or ``"lineint"`` (−ln of it). With ``noise``,
         quantum and electronic noise are drawn from a generator seeded by ``(seed, view)``:
         the same seed gives the same bytes, and every view its own independent stream.
+        ``realism``: the scanner's imperfections (:class:`~xrayraster.physics.realism.Realism`;
+        default none). Its fixed patterns, the flats' noise and the gain map, are drawn from ``seed``
+        once for every view (so they need a seed even without ``noise``).
         """
+        realism = realism or Realism()
         if noise and seed is None:
             raise RenderError("noise=True needs a seed (an int), so the noise is reproducible")
+        if realism.needs_seed and seed is None:
+            raise RenderError("flat_fields and gain_variation need a seed (an int): their patterns are drawn from it")
+        detector = detector or Detector()
         lengths = self.path_lengths(scene, view)
         view %= self.vector_geometry.num_views
         rng = np.random.default_rng([int(seed), view]) if noise else None
         factor = pixel_photon_factor(self.vector_geometry, view)
-        return radiograph(lengths, scene.materials, spectrum, detector or Detector(), factor, output=output,
-                          noise=noise, rng=rng, threads=self.threads)
+        gain, flat = self._fixed_patterns(spectrum, detector, realism, seed)
+        return radiograph(lengths, scene.materials, spectrum, detector, factor, output=output, noise=noise, rng=rng,
+                          threads=self.threads, focal_sigma_px=self._focal_sigma_px(realism, view), gain=gain,
+                          flat_noise=flat)
+
+    def _focal_sigma_px(self, realism: Realism, view: int) -> tuple[float, float]:
+        if not realism.focal_spot_mm:
+            return (0.0, 0.0)
+        return focal_sigma_px(self.vector_geometry, view, realism.focal_spot_mm, realism.focal_plane_mm)
+
+    def _fixed_patterns(self, spectrum, detector: Detector, realism: Realism, seed):
+        """The scan's gain map and flat noise (None when off), drawn from ``seed`` on their own streams;
+        the flats are exposed in view 0's geometry. Kept for the next view of the same scan, as
+        they are drawn from the same streams every time: the bytes do not depend on the views asked."""
+        if not realism.needs_seed:
+            return None, None
+        key = (int(seed), spectrum, detector, realism)
+        if self._calibration is None or self._calibration[0] != key:
+            shape = self.vector_geometry.detector_shape
+            gain = flat = None
+            if realism.gain_variation:
+                gain = gain_map(realism.gain_variation, shape, calibration_rng(seed, GAIN_TAG))
+            if realism.flat_fields is not None:
+                flat = flat_noise(spectrum, detector, pixel_photon_factor(self.vector_geometry, 0), shape,
+                                  realism.flat_fields, calibration_rng(seed, FLAT_TAG),
+                                  focal_sigma_px=self._focal_sigma_px(realism, 0), threads=self.threads)
+            self._calibration = (key, gain, flat)
+        return self._calibration[1:]
 
     # -- every view in one call ----------------------------------------------------------------
 
@@ -67,20 +103,24 @@ class Renderer(PathLengthRenderer):
 
     def project_all(self, scene: Scene, spectrum, views=None, *, detector: Detector | None = None,
                     output: str = "lineint", noise: bool = False, seed: int | None = None,
-                    progress=None) -> Projections:
+                    realism: Realism | None = None, progress=None) -> Projections:
         """The radiographs of ``views`` (default every view) stacked into an
         :class:`~xrayraster.Projections` on ``geometry[views]``, each view exactly :meth:`project`
         (same options; noise streams are seeded per view index, so a subset gives the same bytes
         as the full run). Unit: ``"1"`` for lineint and transmission; raw is ``"counts"`` for a
         counting detector, else ``"keV deposited"``. The provenance records the views, materials,
         spectrum, detector, seed and per-view bins, dropped signal and starved pixels, as the
-        command line writes them. ``progress`` as in :meth:`path_lengths_all`.
+        command line writes them, and the realism options when any is on. ``progress`` as in
+        :meth:`path_lengths_all`.
         """
         views = self._views(views)
         detector = detector or Detector()
-        shots = [self.project(scene, spectrum, v, detector=detector, output=output, noise=noise, seed=seed)
-                 for v in _report(views, progress, output)]
+        realism = realism or Realism()
+        shots = [self.project(scene, spectrum, v, detector=detector, output=output, noise=noise, seed=seed,
+                              realism=realism) for v in _report(views, progress, output)]
         unit = "1" if output != "raw" else "counts" if detector.counting else "keV deposited"
+        # An ideal scan's provenance stays as it was before the realism options existed.
+        extra = {"realism": realism.to_dict()} if realism.active else {}
         return Projections(np.stack([shot.image for shot in shots]), self.geometry[views], output, unit, {
             "materials": [_material_name(m) for m in scene.materials],
             "material_compositions": [repr(m) for m in scene.materials],
@@ -97,6 +137,7 @@ class Renderer(PathLengthRenderer):
             "supersampling": self.supersampling,
             "method": self.last_method,
             "renderer": self.gl.renderer,
+            **extra,
         })
 
     def _views(self, views) -> list[int]:
