@@ -128,7 +128,8 @@ def test_toml_scene_renders_every_material(doc, line, text, expect, tmp_path, gl
 
 def test_bundled_examples_are_quoted_verbatim_in_the_format_reference():
     """Scene files in docs/scene-format.md (loaded there as toml blocks); weave files in docs/weave.md
-    and woven scan files (a [weave] and a [source]) in docs/scan.md, as text blocks."""
+    and woven scan files (a [weave] and a [source]) in docs/scan.md or, the twin's, docs/twin.md, as
+    text blocks."""
     quoted = {text.strip() for doc, _, text, _ in TOML if doc.name == "scene-format.md"}
     examples = sorted((ROOT / "examples").glob("*.toml"))
     assert examples
@@ -136,9 +137,9 @@ def test_bundled_examples_are_quoted_verbatim_in_the_format_reference():
         text = example.read_text().strip()
         data = tomllib.loads(text)
         if "weave" in data:
-            doc = "scan.md" if "source" in data else "weave.md"
-            assert f"```text\n{text}\n```" in (ROOT / "docs" / doc).read_text(), \
-                f"{example.name} differs from its copy in docs/{doc}"
+            docs = ("scan.md", "twin.md") if "source" in data else ("weave.md",)
+            assert any(f"```text\n{text}\n```" in (ROOT / "docs" / doc).read_text() for doc in docs), \
+                f"{example.name} differs from its copy in docs/{' or docs/'.join(docs)}"
         else:
             assert text in quoted, f"{example.name} differs from its copy in docs/scene-format.md"
 

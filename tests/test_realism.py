@@ -359,3 +359,21 @@ def test_no_mount_leaves_the_sample_as_it_is(tmp_path):
     loaded = load_scan_file(path)
     sample = loaded.sample_scene()
     assert loaded.mount is None and loaded.with_mount(sample) is sample and loaded.realism == Realism()
+
+
+def test_a_scan_reconstructs_the_mount_and_labels_only_the_sample(gl, cl, tmp_path):
+    """End to end: xr.scan projects the post (its μ reconstructs inside it, monochromatic 30 keV:
+    no beam hardening) and labels.tif stays 0 there; scan.json names the mount and the options."""
+    path = tmp_path / "scan.toml"
+    path.write_text(scan_text(MOUNT).replace("num_views = 2", "num_views = 90"))
+    result = xr.scan(path)
+    z, y, x = np.meshgrid(*(np.arange(n) - (n - 1) / 2 for n in result.volume.geometry.shape), indexing="ij")
+    centres = np.stack([x * 0.5, y * 0.5, z * 0.5 - 2.0], axis=-1)
+    # Inside the post, below the sample and within the rows the detector sees (z > -5 mm at the axis).
+    post_only = np.all(np.abs(centres[..., :2]) < MOUNT_HALF[:2] - 1.0, axis=-1) & (np.abs(centres[..., 2] + 3.75) < 0.8)
+    mu = 10 * xr.Material.named("pmma").attenuation_per_mm(30.0)  # cm⁻¹
+    assert post_only.sum() >= 32 and not result.labels.data[post_only].any()
+    assert abs(result.volume.data[post_only].mean() / mu - 1) < 0.05
+    assert result.metadata["mount"][0]["name"] == "post"
+    assert result.metadata["realism"] == {"focal_spot_mm": 0.0, "focal_plane_mm": None, "flat_fields": None,
+                                          "gain_variation": 0.0}

@@ -41,6 +41,7 @@ from .gl.context import GLContext
 from .gl.voxelize import LabelVolume, voxelize
 from .physics.detector import Detector
 from .physics.radiograph import Radiograph
+from .physics.realism import Realism
 from .physics.spectrum import Spectrum
 from .pipeline import Comparison, ScanResult, compare, scan
 from .recon.fdk import FDKStream, Volume, fdk
@@ -73,6 +74,7 @@ __all__ = [
     "PhysicsError",
     "Projections",
     "Radiograph",
+    "Realism",
     "ReconstructionError",
     "RenderError",
     "Renderer",

@@ -80,12 +80,13 @@ def _render_radiographs(args) -> int:
     geometry, scene, spectrum = loaded.geometry, loaded.scene, loaded.spectrum
     detector = loaded.detector if loaded.detector is not None else Detector()
     output = args.output or "lineint"
-    seed = (0 if args.seed is None else args.seed) if args.noise else None
+    # The flats' noise and the gain map are drawn from the seed, with or without the views' noise.
+    seed = (0 if args.seed is None else args.seed) if args.noise or loaded.realism.needs_seed else None
     views = parse_views(args.views, geometry.num_views)
     start = time.perf_counter()
     with Renderer(geometry, supersampling=args.supersampling, overlap=args.overlap) as renderer:
         projections = renderer.project_all(scene, spectrum, views, detector=detector, output=output, noise=args.noise,
-                                           seed=seed)
+                                           seed=seed, realism=loaded.realism)
     seconds = time.perf_counter() - start
     stack, units, facts = projections.data, projections.unit, projections.provenance
     starved, method, driver = facts["starved_pixels"], facts["method"], facts["renderer"]

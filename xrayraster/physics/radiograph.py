@@ -18,6 +18,7 @@ from ..core.errors import PhysicsError
 from . import beer_lambert
 from .detector import Detector, gaussian_blur
 from .realism import scaled_poisson
+from .spectral_table import SpectralTable, moment_weights, spectral_table
 
 
 @dataclass(frozen=True)
@@ -52,9 +53,36 @@ def attenuation_table(materials, energies_kev) -> np.ndarray:
 BIN_TOLERANCE = 1e-6
 
 
+@dataclass(frozen=True, eq=False)
+class SpectralModel:
+    """What every view of a scan shares (:func:`spectral_model`): the energy bins kept (``energies``
+    keV, ``photons`` per mm² at 1 m, the open-beam signal share ``dropped``), μ per material
+    channel and bin (``mu``, mm⁻¹), and the spectral table that noisy views interpolate their sums
+    from (:mod:`~xrayraster.physics.spectral_table`; None: the exact sum)."""
+
+    energies: np.ndarray
+    photons: np.ndarray
+    dropped: float
+    mu: np.ndarray
+    table: SpectralTable | None = None
+
+
+def spectral_model(materials, spectrum, detector: Detector, *, bin_tolerance: float = BIN_TOLERANCE,
+                   longest_mm: float | None = None) -> SpectralModel:
+    """The bins, μ and, given ``longest_mm`` (the longest path through the scene, mm), the
+    spectral table of ``materials`` under ``spectrum`` and ``detector``: built once per scan
+    instead of once per view."""
+    energies, photons, dropped = _bins(spectrum, detector, bin_tolerance)
+    mu = attenuation_table(materials, energies)
+    table = None
+    if longest_mm is not None:
+        table = spectral_table(mu, moment_weights(photons, detector.efficiency(energies), energies), longest_mm)
+    return SpectralModel(energies, photons, dropped, mu, table)
+
+
 def radiograph(lengths, materials, spectrum, detector: Detector, factor, *, output="lineint", noise=False, rng=None,
                bin_tolerance: float = BIN_TOLERANCE, threads: int | None = None, focal_sigma_px=(0.0, 0.0),
-               gain=None, flat_noise=None) -> Radiograph:
+               gain=None, flat_noise=None, model: SpectralModel | None = None) -> Radiograph:
     """The radiograph of one view.
 
     ``lengths``: ``(channels, rows, cols)`` mm, channels in ``materials`` order; ``spectrum``:
@@ -65,15 +93,17 @@ def radiograph(lengths, materials, spectrum, detector: Detector, factor, *, outp
     spectral sum (default every core; :func:`~xrayraster.physics.beer_lambert.thread_count`).
     The scanner's imperfections (:mod:`~xrayraster.physics.realism`): ``focal_sigma_px``, the focal
     spot's Gaussian blur ``(rows, cols)`` in pixels; ``gain``, a per-pixel gain map the flat does not
-    correct; ``flat_noise``, the scan's flat over the exact one (:func:`flat_noise`).
+    correct; ``flat_noise``, the scan's flat over the exact one (:func:`flat_noise`). ``model``:
+    the bins, μ and spectral table of :func:`spectral_model` for these materials, spectrum and
+    detector (made here when None, without a table), so the views of a scan share them.
     """
     check_choice(output, RADIOGRAPH_OUTPUTS, "output", PhysicsError)
     if noise and rng is None:
         raise PhysicsError("noise=True needs rng (a numpy.random.Generator, e.g. np.random.default_rng(seed))")
-    energies, photons, dropped = _bins(spectrum, detector, bin_tolerance)
-    mu = attenuation_table(materials, energies)
+    model = model or spectral_model(materials, spectrum, detector, bin_tolerance=bin_tolerance)
+    energies, photons, dropped, mu = model.energies, model.photons, model.dropped, model.mu
     quantum = _detected(lengths, mu, photons, energies, detector, factor, focal_sigma_px, rng if noise else None,
-                        threads)
+                        threads, model.table)
     raw = detector.read_out(quantum, rng if noise else None, gain=gain)
     if output == "raw":
         return Radiograph(raw.astype(np.float32), output, 0, len(energies), dropped)
@@ -105,7 +135,7 @@ def flat_noise(spectrum, detector: Detector, factor, shape: tuple[int, int], fra
     energies, photons, _ = _bins(spectrum, detector, bin_tolerance)
     open_beam = np.zeros((1, *shape), np.float32), np.zeros((1, len(energies)))  # no path length, no μ
     exposed = _detected(*open_beam, photons, energies, detector, frames * np.asarray(factor, dtype=np.float64),
-                        focal_sigma_px, rng, threads) / frames
+                        focal_sigma_px, rng, threads, None) / frames
     flat = detector.read_out(exposed, rng, frames=frames) - detector.dark
     ratio = flat / (_exact_flat(photons, energies, detector, factor, shape, focal_sigma_px) - detector.dark)
     if np.any(ratio <= 0):
@@ -120,8 +150,10 @@ def _bins(spectrum, detector: Detector, bin_tolerance: float) -> tuple[np.ndarra
     return spectrum.energies[keep], spectrum.fluence[keep], dropped
 
 
-def _detected(lengths, mu, photons, energies, detector: Detector, factor, focal_sigma_px, rng, threads) -> np.ndarray:
-    """The detected signal before read-out: expected (``rng`` None) or one noisy realisation.
+def _detected(lengths, mu, photons, energies, detector: Detector, factor, focal_sigma_px, rng, threads,
+              table: SpectralTable | None) -> np.ndarray:
+    """The detected signal before read-out: expected (``rng`` None) or one noisy realisation, its
+    sums over bins interpolated from ``table`` where there is one (noisy views without a focal spot).
 
     A focal spot blurs the transmitted intensity before its photons are counted, so the blurred
     mean (and, integrating, the blurred variance Σ E²·η·n) is drawn from: a Poisson count (counting)
@@ -132,7 +164,7 @@ def _detected(lengths, mu, photons, energies, detector: Detector, factor, focal_
         if rng is None:
             return beer_lambert.expected_signal(lengths, mu, photons, weights, factor, threads)
         return beer_lambert.sampled_signal(lengths, mu, photons, detector.efficiency(energies), energies, factor,
-                                           detector.counting, rng, threads)
+                                           detector.counting, rng, threads, table)
     mean = _focal_blur(beer_lambert.expected_signal(lengths, mu, photons, weights, factor, threads), *focal_sigma_px)
     if rng is None:
         return mean

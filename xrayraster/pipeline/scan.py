@@ -94,7 +94,10 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False) -
     seconds = dict.fromkeys(STAGES, 0.0)  # projections and fdk take turns, so each is a sum
     with _timed(seconds, "sample"):
         scene = loaded.sample_scene(progress=progress is True)
-    with Renderer(loaded.geometry) as renderer, CLContext() as cl:
+    # A woven sample's yarns interpenetrate (docs/weave.md), so its renderer resolves overlaps by
+    # priority without first searching the meshes for them (seconds at a million triangles).
+    overlap = "resolve" if loaded.weave is not None else "auto"
+    with Renderer(loaded.geometry, overlap=overlap) as renderer, CLContext() as cl:
         with _timed(seconds, "fdk"):
             stream = FDKStream(loaded.geometry, loaded.volume, filter=options.filter, context=cl,
                                batch_views=BATCH_VIEWS)
@@ -124,7 +127,10 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False) -
         "triangles": scene.num_triangles,
         "projections": {"batch_views": stream.batch_views, "bins_used": max(provenance["bins_used"]),
                         "dropped_signal_share": max(provenance["dropped_signal_share"]),
-                        "starved_pixels": sum(provenance["starved_pixels"])},
+                        "starved_pixels": sum(provenance["starved_pixels"]),
+                        "spectral_table": provenance.get("spectral_table")},
+        "realism": loaded.realism.to_dict(),
+        "mount": [{"name": o.name, "material": repr(o.material)} for o in (loaded.mount.objects if loaded.mount else ())],
         "units": {"volume": volume.unit, "lengths": "mm", "seconds": "s", "peak_rss": "MiB"},
         "libraries": {name: _version(name) for name in _LIBRARIES},
         "devices": devices,
@@ -137,8 +143,10 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False) -
 
 def _project_into(stream: FDKStream, renderer: Renderer, scene, loaded: ScanFile, seconds: dict, progress,
                   keep: bool) -> tuple[list[dict], list[np.ndarray]]:
-    """Render the views batch by batch into ``stream``, timing the two stages apart. Returns the
+    """Render the views of the sample and its mount batch by batch into ``stream``, timing the two
+    stages apart; noisy views interpolate their spectral sums (``Renderer.project``). Returns the
     batches' provenance and, if ``keep``, their line integrals (else they are dropped at once)."""
+    scanned = loaded.with_mount(scene)
     total = loaded.geometry.num_views
     report, bar = _progress(progress, total)
     provenances, stacks = [], []
@@ -146,8 +154,9 @@ def _project_into(stream: FDKStream, renderer: Renderer, scene, loaded: ScanFile
         for first in range(0, total, stream.batch_views):
             views = list(range(first, min(first + stream.batch_views, total)))
             with _timed(seconds, "projections"):
-                batch = renderer.project_all(scene, loaded.spectrum, views, detector=loaded.detector,
+                batch = renderer.project_all(scanned, loaded.spectrum, views, detector=loaded.detector,
                                              noise=loaded.options.noise, seed=loaded.options.seed,
+                                             realism=loaded.realism, spectral_table=True,
                                              progress=lambda done, _, first=first: report(first + done, total))
             with _timed(seconds, "fdk"):
                 stream.add(first, batch.data)

@@ -12,7 +12,7 @@ from ..core.projections import Projections
 from ..gl.pathlengths import PathLengthRenderer
 from ..physics.beer_lambert import pixel_photon_factor, thread_count
 from ..physics.detector import Detector
-from ..physics.radiograph import Radiograph, flat_noise, radiograph
+from ..physics.radiograph import Radiograph, SpectralModel, flat_noise, radiograph, spectral_model
 from ..physics.realism import FLAT_TAG, GAIN_TAG, Realism, calibration_rng, focal_sigma_px, gain_map
 from ..scene.scene import Scene
 
@@ -27,11 +27,12 @@ class Renderer(PathLengthRenderer):
     def __init__(self, geometry, *, threads: int | None = None, **options):
         self.threads = thread_count(threads)  # checked before a GL context is made
         self._calibration = None  # (key, gain map, flat noise) of the last scan projected: see _fixed_patterns
+        self._model = None  # (key, SpectralModel) of the last scene projected: see _spectral_model
         super().__init__(geometry, **options)
 
     def project(self, scene: Scene, spectrum, view: int = 0, *, detector: Detector | None = None,
                 output: str = "lineint", noise: bool = False, seed: int | None = None,
-                realism: Realism | None = None) -> Radiograph:
+                realism: Realism | None = None, spectral_table: bool = False) -> Radiograph:
         """The radiograph of one view (:class:`~xrayraster.physics.radiograph.Radiograph`).
 
         Scene materials must be :class:`~xrayraster.Material` objects. ``output``: ``"raw"``
@@ -40,7 +41,11 @@ class Renderer(PathLengthRenderer):
         the same seed gives the same bytes, and every view its own independent stream.
         ``realism``: the scanner's imperfections (:class:`~xrayraster.physics.realism.Realism`;
         default none). Its fixed patterns, the flats' noise and the gain map, are drawn from ``seed``
-        once for every view (so they need a seed even without ``noise``).
+        once for every view (so they need a seed even without ``noise``). ``spectral_table``: with
+        ``noise``, the sums over energy bins are interpolated from a table of measured error
+        (:mod:`~xrayraster.physics.spectral_table`, ≤ 1e-5 relative: a tenth of the photon noise at
+        10⁸ photons a pixel) instead of summed in every pixel; noise-free views stay exact.
+        The bins, attenuation coefficients and table are made once for the views of a scene.
         """
         realism = realism or Realism()
         if noise and seed is None:
@@ -53,9 +58,19 @@ class Renderer(PathLengthRenderer):
         rng = np.random.default_rng([int(seed), view]) if noise else None
         factor = pixel_photon_factor(self.vector_geometry, view)
         gain, flat = self._fixed_patterns(spectrum, detector, realism, seed)
+        model = self._spectral_model(scene, spectrum, detector, spectral_table and noise)
         return radiograph(lengths, scene.materials, spectrum, detector, factor, output=output, noise=noise, rng=rng,
                           threads=self.threads, focal_sigma_px=self._focal_sigma_px(realism, view), gain=gain,
-                          flat_noise=flat)
+                          flat_noise=flat, model=model)
+
+    def _spectral_model(self, scene: Scene, spectrum, detector: Detector, table: bool) -> SpectralModel:
+        """The scene's bins, μ and (``table``) spectral table, kept for the next view of the same scene.
+        The table covers every path up to the diagonal of the scene's bounds, the longest chord."""
+        longest = float(np.linalg.norm(np.ptp(scene.bounds, axis=0))) if table else None
+        key = (tuple(scene.materials), spectrum, detector, longest)
+        if self._model is None or self._model[0] != key:
+            self._model = (key, spectral_model(scene.materials, spectrum, detector, longest_mm=longest))
+        return self._model[1]
 
     def _focal_sigma_px(self, realism: Realism, view: int) -> tuple[float, float]:
         if not realism.focal_spot_mm:
@@ -103,24 +118,27 @@ class Renderer(PathLengthRenderer):
 
     def project_all(self, scene: Scene, spectrum, views=None, *, detector: Detector | None = None,
                     output: str = "lineint", noise: bool = False, seed: int | None = None,
-                    realism: Realism | None = None, progress=None) -> Projections:
+                    realism: Realism | None = None, spectral_table: bool = False, progress=None) -> Projections:
         """The radiographs of ``views`` (default every view) stacked into an
         :class:`~xrayraster.Projections` on ``geometry[views]``, each view exactly :meth:`project`
         (same options; noise streams are seeded per view index, so a subset gives the same bytes
         as the full run). Unit: ``"1"`` for lineint and transmission; raw is ``"counts"`` for a
         counting detector, else ``"keV deposited"``. The provenance records the views, materials,
         spectrum, detector, seed and per-view bins, dropped signal and starved pixels, as the
-        command line writes them, and the realism options when any is on. ``progress`` as in
-        :meth:`path_lengths_all`.
+        command line writes them, the realism options when any is on, and the spectral table's grid
+        and measured error when one was used. ``progress`` as in :meth:`path_lengths_all`.
         """
         views = self._views(views)
         detector = detector or Detector()
         realism = realism or Realism()
         shots = [self.project(scene, spectrum, v, detector=detector, output=output, noise=noise, seed=seed,
-                              realism=realism) for v in _report(views, progress, output)]
+                              realism=realism, spectral_table=spectral_table) for v in _report(views, progress, output)]
         unit = "1" if output != "raw" else "counts" if detector.counting else "keV deposited"
         # An ideal scan's provenance stays as it was before the realism options existed.
         extra = {"realism": realism.to_dict()} if realism.active else {}
+        table = self._model[1].table if spectral_table and noise else None
+        if table is not None:
+            extra["spectral_table"] = {"grid": list(table.shape), "error": table.error}
         return Projections(np.stack([shot.image for shot in shots]), self.geometry[views], output, unit, {
             "materials": [_material_name(m) for m in scene.materials],
             "material_compositions": [repr(m) for m in scene.materials],
