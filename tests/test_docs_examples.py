@@ -153,7 +153,7 @@ def test_readme_starts_with_the_two_commands():
     text = (ROOT / "README.md").read_text()
     assert text.startswith("```"), "README.md must open with the commands block"
     assert _readme_commands() == [
-        'pip install ".[test]" && xrayraster scan examples/scan_small.toml -o out/scan',
+        'pip install ".[test]" && xrayraster scan examples/twin_small.toml -o out/scan',
         "pytest",
     ]
 

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 import xrayraster as xr
-from xrayraster.recon import fdk as reconstruction
+from xrayraster.recon import fdk_stream as reconstruction
 from xrayraster.recon.fdk import FDKStream, ReconstructionError, fdk
 from xrayraster.core.geometry import GeometryError
 from xrayraster.core.choices import FILTERS
@@ -327,7 +327,7 @@ def test_bad_input_is_refused_with_the_fix(cl):
 
 
 def test_host_memory_is_checked_before_any_work():
-    from xrayraster.recon.fdk import plan_memory
+    from xrayraster.recon.fdk_stream import plan_memory
     from xrayraster.recon.fdk_weights import fdk_views
 
     views = fdk_views(CASES["full"], SMALL_VOLUME)

@@ -85,10 +85,11 @@ def is_scan_output(directory) -> bool:
 
 def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False) -> ScanResult:
     """Run the scan of a :class:`~xrayraster.pipeline.ScanFile` (or a scan file's path, loaded and
-    checked first): sample → ``Renderer.project_all`` (line integrals, noise as the options say) →
-    ``xr.fdk`` on the file's grid → ``xr.voxelize`` on the same grid. ``progress``: a bar with ETA
-    for the projections (True), a callable ``progress(done, total)``, or nothing (False).
-    ``keep_projections``: return the projections too (they are otherwise freed after the FDK)."""
+    checked first): sample → ``Renderer.project_all`` (line integrals of the sample and its mount,
+    noise and realism as the file says) in batches, each fed to ``xr.FDKStream`` on the file's grid
+    → ``xr.voxelize`` of the sample on the same grid. ``progress``: a bar with ETA for the
+    projections (True), a callable ``progress(done, total)``, or nothing (False).
+    ``keep_projections``: return the projections too (otherwise each batch is freed once filtered)."""
     loaded = scan_file_or_path if isinstance(scan_file_or_path, ScanFile) else load_scan_file(scan_file_or_path)
     options = loaded.options
     seconds = dict.fromkeys(STAGES, 0.0)  # projections and fdk take turns, so each is a sum
@@ -130,7 +131,8 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False) -
                         "starved_pixels": sum(provenance["starved_pixels"]),
                         "spectral_table": provenance.get("spectral_table")},
         "realism": loaded.realism.to_dict(),
-        "mount": [{"name": o.name, "material": repr(o.material)} for o in (loaded.mount.objects if loaded.mount else ())],
+        "mount": [{"name": o.name, "material": repr(o.material)}
+                  for o in (loaded.mount.objects if loaded.mount is not None else ())],
         "units": {"volume": volume.unit, "lengths": "mm", "seconds": "s", "peak_rss": "MiB"},
         "libraries": {name: _version(name) for name in _LIBRARIES},
         "devices": devices,

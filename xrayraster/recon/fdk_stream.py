@@ -1,0 +1,388 @@
+"""FDK with the views fed in batches (:class:`FDKStream`): weights, ramp filter and
+backprojection on an OpenCL device, and the memory plan that decides where volume and views live.
+
+The algorithm and its weights are in :mod:`xrayraster.recon.fdk_weights`, the filter in
+:mod:`xrayraster.recon.ramp_filter`, the kernels in ``shaders/fdk_filter.cl`` and
+``shaders/fdk_backproject.cl``. ``references/fdk.py`` is the same algorithm in float64
+NumPy, against which the kernels are tested.
+
+Memory: when the volume fits the device next to one batch of views, it stays there and each
+batch is filtered and backprojected as it arrives, so views can be streamed from a simulation
+without ever holding them all. Otherwise the volume is reconstructed in z-slabs that fit the
+device next to one batch of filtered views; filtered projections stay on the device when they
+all fit, else they wait in host memory and are uploaded again for each slab. Both needs are
+estimated before any work starts, and a request that cannot fit is refused with the sizes.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.choices import RECONSTRUCTION_INPUTS, check_choice
+from ..core.errors import ReconstructionError
+from ..core.geometry import as_vector_geometry
+from ..core.memory import available_memory
+from ..core.volume import VolumeGeometry
+from .fdk_weights import FDKViews, fdk_views
+from .opencl import CLContext
+from .ramp_filter import ramp_response
+from .volume import MM_TO_CM, Volume
+
+log = logging.getLogger(__name__)
+
+ZCHUNK = 16  # voxels along z per work-item of the scalar backprojection (shaders/fdk_backproject.cl)
+MAX_GROUPS = 8  # float8s along z per work-item of backproject_windowed: up to 64 voxels
+SLAB_MULTIPLE = 64  # slabs are cut at multiples of both
+TILE = (16, 16, 1)  # work-group: a 16×16 column of voxels reads a compact patch of every view
+MAX_BATCH_VIEWS = 256  # views per backprojection launch: 48 bytes each of constant memory
+# Kernel choices, normally automatic; the tests set them to check every path on one device.
+LAYOUT = "auto"  # filtered views by "rows" (GPUs), by "columns" (CPUs), or "auto" by device type
+VECTORISED = True  # backproject_windowed where it applies (x86 CPUs with AVX2, upright detectors)
+DEVICE_SHARE = 0.8  # of the device's global memory we plan to use
+WINDOW_PAD = 32 * 4  # bytes after each batch of filtered views: backproject_windowed reads past the last column
+
+
+def check_shape(projections, geometry) -> None:
+    """Refuse a stack that is not (views, rows, cols) of ``geometry``."""
+    vec = as_vector_geometry(geometry)
+    shape = np.shape(projections)
+    expected = (vec.num_views, *vec.detector_shape)
+    if len(shape) != 3 or shape[0] == 0:
+        raise ReconstructionError(
+            f"projections must be a (views, rows, cols) stack with at least one view, got shape {shape}")
+    if shape != expected:
+        raise ReconstructionError(
+            f"projections have shape {shape} but the geometry has {expected[0]} views of "
+            f"{expected[1]}×{expected[2]} pixels {expected}: pass the geometry the projections were taken with "
+            "(or select its views: geometry[indices])")
+
+
+def line_integrals(projections, geometry, input: str = "lineint") -> np.ndarray:
+    """The projections as float32 line integrals, checked against ``geometry``."""
+    check_choice(input, RECONSTRUCTION_INPUTS, "input", ReconstructionError)
+    p = np.asarray(projections)
+    check_shape(p, geometry)
+    if not np.issubdtype(p.dtype, np.number) or np.iscomplexobj(p):
+        raise ReconstructionError(f"projections must be real numbers, got dtype {p.dtype}")
+    p = p.astype(np.float32, copy=False)
+    bad = ~np.isfinite(p)
+    if input == "transmission":
+        bad |= p <= 0
+    if bad.any():
+        v, r, c = np.argwhere(bad)[0]
+        what = "not finite or ≤ 0" if input == "transmission" else "not finite"
+        fix = ("clamp starved pixels to a small positive transmission before −log, as xrayraster's radiographs do"
+               if input == "transmission" else "find where the NaN/inf came from (a −log of values ≤ 0?)")
+        raise ReconstructionError(
+            f"projections: {int(bad.sum())} value(s) are {what} (first at view {v}, row {r}, col {c}: "
+            f"{p[v, r, c]!r}); {fix}")
+    if input == "transmission":
+        p = -np.log(p)
+    return np.ascontiguousarray(p, dtype=np.float32)
+
+
+class FDKStream:
+    """FDK with the views fed in batches, as a simulation renders them: each batch is filtered
+    and backprojected when it arrives, so only the volume and one batch of views are in memory.
+
+        with FDKStream(geometry, grid) as stream:
+            for first in range(0, geometry.num_views, stream.batch_views):
+                stream.add(first, render(first, first + stream.batch_views))  # line integrals
+            volume = stream.result()  # a Volume in cm⁻¹, once every view was added
+
+    Options as :func:`fdk`. Views may come in any order and batch size (backprojection is a sum);
+    :meth:`result` refuses to run until each view came exactly once.
+
+    Memory plan (checked before any work, a request that cannot fit is refused with the sizes):
+    when the whole volume fits the device next to one batch, it stays there and each batch is
+    backprojected on arrival; on CPU devices it lives in the very array returned (no copy).
+    Otherwise the filtered views wait (on the device when they all fit, else in host memory)
+    and :meth:`result` backprojects them slab by slab.
+    """
+
+    def __init__(self, geometry, volume: VolumeGeometry, *, filter: str = "ram-lak", cutoff: float = 1.0,
+                 scan: str = "auto", context: CLContext | None = None, device: str | None = None,
+                 memory_limit: int | None = None, batch_views: int = MAX_BATCH_VIEWS):
+        if not isinstance(volume, VolumeGeometry):
+            raise ReconstructionError(
+                f"volume must be a VolumeGeometry (the grid to reconstruct), got {type(volume).__name__}")
+        self.geometry, self.volume = geometry, volume
+        self.vector_geometry = vec = as_vector_geometry(geometry)
+        self.views = fdk_views(vec, volume, scan)
+        response = ramp_response(vec.detector_shape[1], self.views.pixel_pitch, filter, cutoff)
+        self._provenance = {"method": "FDK" if vec.beam == "cone" else "FBP", "geometry": geometry.to_dict(),
+                            "filter": filter, "cutoff": cutoff, "scan": scan}
+        self.ctx = context or CLContext(device)
+        self._owns_context = context is None
+        info = self.ctx.info
+        device_bytes = int(info.global_mem * DEVICE_SHARE) if memory_limit is None else int(memory_limit)
+        self.plan = plan_memory(self.views, volume, len(response), device_bytes, info.max_alloc, info.local_mem,
+                                available_memory(), batch_views)
+        rows, cols = self.views.detector_shape
+        log.info("FDK on %s: %d views of %d×%d, volume %s, %d-view batches, %d-plane slabs, %s", info.name,
+                 len(self.views.scale), rows, cols, volume.shape, self.plan.batch, self.plan.slab,
+                 "backprojected as they arrive" if self.plan.streamed
+                 else f"filtered views kept {'on the device' if self.plan.resident else 'in host memory'}")
+        self._layout = {"COLUMN_MAJOR": 1} if _column_major(info, LAYOUT) else {}
+        self._filter_setup(response)
+        self._backproject_setup()
+        self._added = np.zeros(len(self.views.scale), bool)
+        self._kept = []  # (views, filtered batch on the device or in host memory) until result(), unless streamed
+        self._out = np.zeros(volume.shape, np.float32)  # zeros: the slabs on a CPU device accumulate into it
+        self._slabs = [self._slab_buffer(z0) for z0 in self._slab_starts()] if self.plan.streamed else None
+
+    @property
+    def batch_views(self) -> int:
+        """Views per filtering and backprojection launch: feed batches of this size (or any size)."""
+        return self.plan.batch
+
+    def add(self, first: int, projections, input: str = "lineint") -> None:
+        """Filter and backproject views ``first … first + len(projections) − 1`` of the geometry:
+        ``projections`` (views, rows, cols) are line integrals (or ``input="transmission"``)."""
+        import pyopencl as cl
+
+        n = len(self._added)
+        count = len(projections) if np.ndim(projections) == 3 else 0
+        if isinstance(first, bool) or not isinstance(first, (int, np.integer)) or not 0 <= first < n:
+            raise ReconstructionError(f"first must be a view index in 0…{n - 1}, got {first!r}")
+        if first + max(count, 1) > n:
+            raise ReconstructionError(f"views {first}…{first + count - 1} run past the geometry's {n} views")
+        stack = line_integrals(projections, self.vector_geometry[first : first + max(count, 1)], input)
+        if self._added[first : first + count].any():
+            raise ReconstructionError(
+                f"views {first}…{first + count - 1}: some were added already; add each view once")
+        for start in range(0, count, self.plan.batch):
+            batch = range(first + start, first + min(start + self.plan.batch, count))
+            filtered = self._filter(batch, stack[start : start + len(batch)])
+            if self.plan.streamed:
+                for z0, slab in zip(self._slab_starts(), self._slabs):
+                    self._backproject(batch, filtered, slab, z0)
+                filtered.release()
+            elif self.plan.resident:
+                self._kept.append((batch, filtered))
+            else:
+                host = np.empty(len(batch) * self._view_bytes // 4, np.float32)
+                cl.enqueue_copy(self.ctx.queue, host, filtered)
+                filtered.release()
+                self._kept.append((batch, host))
+        self._added[first : first + count] = True
+
+    def result(self) -> Volume:
+        """The reconstruction (:class:`Volume`, cm⁻¹) once every view has been added; frees the device memory."""
+        import pyopencl as cl
+
+        missing = np.flatnonzero(~self._added)
+        if len(missing):
+            raise ReconstructionError(f"{len(missing)} view(s) not added yet (first: {missing[0]}); "
+                                      "add every view before asking for the result")
+        nz = self.volume.shape[0]
+        for number, z0 in enumerate(self._slab_starts()):
+            slab = self._slabs[number] if self.plan.streamed else self._slab_buffer(z0)
+            for batch, filtered in () if self.plan.streamed else self._kept:
+                q_dev = filtered if self.plan.resident else self.ctx.buffer(filtered, "r")
+                self._backproject(batch, q_dev, slab, z0)
+                if not self.plan.resident:
+                    q_dev.release()
+            depth = min(self.plan.slab, nz - z0)
+            if self._zero_copy:
+                mapped, _ = cl.enqueue_map_buffer(self.ctx.queue, slab, cl.map_flags.READ, 0, depth * self._plane, np.uint8)
+                mapped.base.release()  # mapping makes the device's writes visible in the array
+            else:
+                cl.enqueue_copy(self.ctx.queue, self._out[z0 : z0 + depth], slab)
+            slab.release()
+        self._slabs = None
+        self.ctx.queue.finish()
+        data, self._out = self._out, None
+        self.release()
+        data *= MM_TO_CM
+        return Volume(data, self.volume, provenance=dict(self._provenance))
+
+    def release(self) -> None:
+        """Free the device buffers (and the context, if this stream made it)."""
+        for buffer in self._slabs or ():
+            buffer.release()
+        for _, filtered in self._kept:
+            if self.plan.resident:
+                filtered.release()
+        self._slabs, self._kept = None, []
+        if self._owns_context and self.ctx is not None:
+            self.ctx.release()
+        self.ctx = None
+
+    def __enter__(self) -> "FDKStream":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.ctx is not None:
+            self.release()
+
+    # -- stage 1: pre-weight and ramp-filter every row of a batch --------------------------------
+
+    def _filter_setup(self, response) -> None:
+        import pyopencl as cl
+
+        n = len(response)
+        rows, cols = self.views.detector_shape
+        defines = {**self._layout, **({"BUF": "__global", "GLOBAL_SCRATCH": 1} if self.plan.global_scratch else {})}
+        self._filter_kernel = self.ctx.kernel("fdk_filter.cl", "filter_rows", defines)
+        bits = int(math.log2(n))
+        reverse = np.array([int(f"{k:0{bits}b}"[::-1], 2) for k in range(n)])
+        self._response = self.ctx.buffer((response[reverse] / n).astype(np.float32), "r")
+        self._twiddle = self.ctx.buffer(np.exp(-2j * np.pi * np.arange(n // 2) / n).astype(np.complex64), "r")
+        self._n_fft = n
+        self._geo = _view_geometry(self.views)
+        self._local_size = int(min(self.ctx.info.max_work_group, n // 2, 256))
+        self._view_bytes = (rows + 2) * (cols + 2) * 4
+        self._local_scratch = cl.LocalMemory(n * 8)
+
+    def _filter(self, batch: range, raw: np.ndarray):
+        """One device buffer of the batch's filtered views, (views, rows + 2, cols + 2) float32."""
+        import pyopencl as cl
+
+        ctx, n, count = self.ctx, self._n_fft, len(batch)
+        rows, cols = self.views.detector_shape
+        pairs = (rows + 1) // 2
+        raw_dev = ctx.buffer(raw, "r")
+        # The pad lets backproject_windowed read its row window past the last column.
+        out_dev = ctx.buffer(count * self._view_bytes + WINDOW_PAD)
+        cl.enqueue_fill_buffer(ctx.queue, out_dev, np.float32(0), 0, count * self._view_bytes + WINDOW_PAD)
+        red_dev = ctx.buffer(self.views.redundancy[batch.start : batch.stop].astype(np.float32), "r")
+        geo_dev = ctx.buffer(self._geo[batch.start : batch.stop], "r")
+        scratch = ctx.buffer(count * pairs * n * 8) if self.plan.global_scratch else self._local_scratch
+        self._filter_kernel(ctx.queue, (count * pairs * self._local_size,), (self._local_size,), raw_dev, out_dev,
+                            red_dev, geo_dev, self._response, self._twiddle, scratch, np.int32(rows), np.int32(cols),
+                            np.int32(n), np.int32(self.views.beam == "cone"))
+        for buffer in (raw_dev, red_dev, geo_dev) + ((scratch,) if self.plan.global_scratch else ()):
+            buffer.release()  # after the kernel: OpenCL keeps them alive until it has run
+        return out_dev
+
+    # -- stage 2: a batch's filtered views into the voxels of one z-slab -------------------------
+
+    def _backproject_setup(self) -> None:
+        import pyopencl as cl
+
+        matrices = self.views.matrices
+        upright = not np.any(matrices[:, :, 2][:, [0, 2]])  # column and depth constant along z
+        # As many float8s per work-item as the slab fills, up to MAX_GROUPS (measured best on 2 cores).
+        groups = min(MAX_GROUPS, 1 << max(0, math.ceil(math.log2(-(-self.plan.slab // 8)))))
+        defines = {"ZCHUNK": ZCHUNK, "GROUPS": groups, **self._layout, **({"UPRIGHT": 1} if upright else {})}
+        kernel = None
+        if VECTORISED and upright and self._layout:  # compiled only where the device has AVX2
+            kernel = self.ctx.kernel("fdk_backproject.cl", "backproject_windowed", defines, optional=True)
+        self._zchunk = 8 * groups if kernel is not None else ZCHUNK
+        self._bp_kernel = kernel or self.ctx.kernel("fdk_backproject.cl", "backproject", defines)
+        fits = self._bp_kernel.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, self.ctx.device)
+        self._tile = TILE if fits >= TILE[0] * TILE[1] else None  # else the driver picks
+        _, ny, nx = self.volume.shape
+        self._plane = ny * nx * 4
+        # On a CPU device a buffer over the result array itself saves a copy of the volume.
+        self._zero_copy = "CPU" in self.ctx.info.kind
+
+    def _slab_starts(self) -> range:
+        return range(0, self.volume.shape[0], self.plan.slab)
+
+    def _slab_buffer(self, z0: int):
+        import pyopencl as cl
+
+        depth = min(self.plan.slab, self.volume.shape[0] - z0)
+        if self._zero_copy:
+            flags = cl.mem_flags.READ_WRITE | cl.mem_flags.USE_HOST_PTR
+            return cl.Buffer(self.ctx.ctx, flags, hostbuf=self._out[z0 : z0 + depth])
+        slab = self.ctx.buffer(depth * self._plane)
+        cl.enqueue_fill_buffer(self.ctx.queue, slab, np.float32(0), 0, depth * self._plane)
+        return slab
+
+    def _backproject(self, batch: range, filtered, slab, z0: int) -> None:
+        rows, cols = self.views.detector_shape
+        nz, ny, nx = self.volume.shape
+        depth = min(self.plan.slab, nz - z0)
+        matrices = self.views.matrices[batch.start : batch.stop].copy()
+        matrices[:, :, 3] += z0 * matrices[:, :, 2]  # slab-local k
+        m_dev = self.ctx.buffer(matrices.reshape(-1, 12).astype(np.float32), "r")
+        s_dev = self.ctx.buffer(self.views.scale[batch.start : batch.stop].astype(np.float32), "r")
+        size = (_round_up(nx, TILE[0]), _round_up(ny, TILE[1]), -(-depth // self._zchunk))
+        self._bp_kernel(self.ctx.queue, size, self._tile, slab, filtered, m_dev, s_dev, np.int32(len(batch)),
+                        np.int32(rows), np.int32(cols), np.int32(nx), np.int32(ny), np.int32(depth))
+        m_dev.release()
+        s_dev.release()
+
+
+@dataclass(frozen=True)
+class _Plan:
+    batch: int  # views per launch
+    slab: int  # z-planes per slab
+    streamed: bool  # the whole volume stays on the device: each batch is backprojected on arrival
+    resident: bool  # else: all filtered views wait on the device (True) or in host memory (False)
+    global_scratch: bool  # a padded row pair does not fit in local memory
+
+
+def plan_memory(views: FDKViews, volume: VolumeGeometry, n_fft: int, device_bytes: int, max_alloc: int,
+                local_bytes: int, host_bytes: int | None, batch_views: int = MAX_BATCH_VIEWS) -> _Plan:
+    """View batches and z-slabs that fit ``device_bytes``; refuses what cannot fit, before any work."""
+    if isinstance(batch_views, bool) or not isinstance(batch_views, (int, np.integer)) or batch_views < 1:
+        raise ReconstructionError(f"batch_views must be a positive integer, got {batch_views!r}")
+    num_views = len(views.scale)
+    rows, cols = views.detector_shape
+    nz, ny, nx = volume.shape
+    filtered = (rows + 2) * (cols + 2) * 4
+    plane = ny * nx * 4
+    global_scratch = n_fft * 8 > local_bytes // 2
+    pairs = (rows + 1) // 2
+    per_view = rows * cols * 4 + filtered + (pairs * n_fft * 8 if global_scratch else 0)  # while filtering
+    most = int(min(num_views, batch_views, MAX_BATCH_VIEWS, max(1, max_alloc // filtered)))
+    max_slab = max_alloc // plane
+    streamed_fit = (device_bytes - nz * plane) // per_view
+    if streamed_fit >= 1 and max_slab >= 1:
+        slab = int(min(nz, max_slab))
+        if SLAB_MULTIPLE <= slab < nz:
+            slab -= slab % SLAB_MULTIPLE
+        plan = _Plan(int(min(most, streamed_fit)), slab, True, False, bool(global_scratch))
+    else:
+        min_slab = min(nz, SLAB_MULTIPLE)
+        batch = int(min(most, (device_bytes - min_slab * plane) // per_view))
+        if batch < 1 or max_slab < 1:
+            raise ReconstructionError(
+                f"the reconstruction does not fit the OpenCL device: one view of {rows}×{cols} pixels and {min_slab} "
+                f"plane(s) of {ny}×{nx} voxels need {_size(per_view + min_slab * plane)}, the plan allows "
+                f"{_size(device_bytes)} (one buffer at most {_size(max_alloc)}); use fewer detector pixels or voxels "
+                "per plane, or a device with more memory")
+        resident = num_views * filtered + batch * per_view + min_slab * plane <= device_bytes
+        room = device_bytes - (num_views * filtered if resident else batch * filtered)
+        slab = int(min(nz, room // plane, max_slab))
+        if SLAB_MULTIPLE <= slab < nz:
+            slab -= slab % SLAB_MULTIPLE
+        plan = _Plan(batch, slab, False, bool(resident), bool(global_scratch))
+    host_need = nz * ny * nx * 4 + (0 if plan.streamed or plan.resident else num_views * filtered)
+    if host_bytes is not None and host_need > host_bytes:
+        raise ReconstructionError(
+            f"the reconstruction needs {_size(host_need)} of host memory (the {nz}×{ny}×{nx} float32 volume"
+            f"{'' if plan.streamed or plan.resident else ' and the filtered projections'}) but {_size(host_bytes)} "
+            "is available; reconstruct a smaller volume (or a part of it with VolumeGeometry.offset)")
+    return plan
+
+
+def _size(nbytes: int) -> str:
+    return f"{nbytes / 2**30:.2f} GiB" if nbytes >= 2**30 else f"{nbytes / 2**20:.1f} MiB"
+
+
+def _view_geometry(views: FDKViews) -> np.ndarray:
+    """(views, 4, 4) float32 per view: s.xyz D, d.xyz 0, u.xyz 0, v.xyz 0 (for cosine weights)."""
+    a = views.vectors
+    s, d, u, v = a[:, 0:3], a[:, 3:6], a[:, 6:9], a[:, 9:12]
+    geo = np.zeros((len(a), 4, 4), np.float32)
+    geo[:, 0, :3], geo[:, 0, 3] = s, views.depth
+    geo[:, 1, :3], geo[:, 2, :3], geo[:, 3, :3] = d, u, v
+    return geo
+
+
+def _column_major(info, layout: str) -> bool:
+    """Filtered views stored column by column: on CPUs (cache lines), not on GPUs (coalescing)."""
+    return layout == "columns" or (layout == "auto" and "CPU" in info.kind)
+
+
+def _round_up(x: int, multiple: int) -> int:
+    return -(-x // multiple) * multiple
