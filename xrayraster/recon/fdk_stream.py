@@ -170,6 +170,9 @@ class FDKStream:
                 filtered.release()
                 self._kept.append((batch, host))
         self._added[first : first + count] = True
+        # Wait for the kernels: the caller's next batch then starts on free cores (a CPU device shares
+        # them with the renderer), and the time add() takes is the reconstruction's own.
+        self.ctx.queue.finish()
 
     def result(self) -> Volume:
         """The reconstruction (:class:`Volume`, cm⁻¹) once every view has been added; frees the device memory."""
