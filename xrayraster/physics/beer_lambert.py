@@ -26,6 +26,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from ..core.errors import PhysicsError
 from ..core.geometry import as_vector_geometry
@@ -125,7 +126,9 @@ def _in_order(work, items, threads: int | None):
     if threads <= 1:
         yield from map(work, items)
         return
-    with ThreadPoolExecutor(threads) as pool:
+    # One BLAS thread per worker: each worker's tensordot would otherwise start a BLAS thread per
+    # core and oversubscribe them (a 512² view, 3 materials, 59 bins, 2 cores: 140–160 → 89–95 ms).
+    with threadpool_limits(limits=1, user_api="blas"), ThreadPoolExecutor(threads) as pool:
         pending = deque(pool.submit(work, item) for item in items[: 2 * threads])
         for item in items[2 * threads :]:
             yield pending.popleft().result()
