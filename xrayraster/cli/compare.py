@@ -2,14 +2,13 @@
 
 Prints the cosine similarity, SSIM, PSNR and the histogram peaks; ``-o DIR`` writes
 ``DIR/histograms.png`` and ``DIR/compare.json`` (``--png`` and ``--json`` name either file
-instead), each atomically. The voxels compared are all, those of ``--mask`` (non-zero), or the
+instead), each atomically, after the checks every command makes (``cli.outputs``). The voxels compared are all, those of ``--mask`` (non-zero), or the
 labelled ones of ``--labels`` (``labels.tif`` of ``xrayraster scan``), of ``--class`` only if given.
 """
 
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +19,7 @@ from ..core.files import atomic_write_text
 from ..io.tiff import read_tiff
 from ..pipeline.compare import MAX_BINS, compare, label_mask, write_histogram_png
 from .options import nonnegative_int, positive_int
+from .outputs import check_outputs
 
 PNG_NAME, JSON_NAME = "histograms.png", "compare.json"
 UNIT_LABELS = {"1/cm": "cm⁻¹", "1/mm": "mm⁻¹"}
@@ -58,9 +58,12 @@ def run(args) -> int:
         raise ConfigError("--class selects classes of --labels L.tif; give --labels too, or use --mask")
     png = args.png or (args.out / PNG_NAME if args.out else None)
     json_path = args.json or (args.out / JSON_NAME if args.out else None)
-    inputs = [p for p in (args.a, args.b, args.mask, args.labels) if p is not None]
-    _check_output(png, PNG_NAME, "--png", inputs)
-    _check_output(json_path, JSON_NAME, "--json", inputs)
+    _check_suffix(png, PNG_NAME, "--png")
+    _check_suffix(json_path, JSON_NAME, "--json")
+    outputs = [p for p in (png, json_path) if p is not None]
+    if outputs:
+        check_outputs(outputs, [p for p in (args.a, args.b, args.mask, args.labels) if p is not None],
+                      main_is_tiff=False)
     (a, a_unit), (b, b_unit) = _read_volume(args.a, "volume A"), _read_volume(args.b, "volume B")
     if a_unit and b_unit and a_unit != b_unit:
         raise ConfigError(f"{args.a} is in {a_unit} and {args.b} in {b_unit}; convert one so both share a unit")
@@ -87,18 +90,11 @@ def run(args) -> int:
     return 0
 
 
-def _check_output(path: Path | None, default_name: str, flag: str, inputs: list[Path]) -> None:
-    """Refuse, before any work, an output of the wrong kind or one that would overwrite an input."""
-    if path is None:
-        return
+def _check_suffix(path: Path | None, default_name: str, flag: str) -> None:
+    """Refuse, before any work, an output of the wrong kind (the rest: :func:`check_outputs`)."""
     suffix = Path(default_name).suffix
-    if path.suffix.lower() != suffix:
+    if path is not None and path.suffix.lower() != suffix:
         raise ConfigError(f"{flag} {path}: the file must end in {suffix}; use e.g. {path.with_name(default_name)}")
-    if path.is_dir():
-        raise ConfigError(f"{flag} {path} is a directory; give a file name ending in {suffix}")
-    for source in inputs:
-        if os.path.realpath(path) == os.path.realpath(source):
-            raise ConfigError(f"{flag} {path} would overwrite the input {source}; choose another output")
 
 
 def _read_tiff(path: Path, what: str) -> tuple[np.ndarray, dict]:

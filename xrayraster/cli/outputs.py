@@ -73,22 +73,25 @@ def _probe_directory(directory: Path, out: Path) -> None:
                 pass
 
 
-def check_outputs(outputs, inputs) -> None:
+def check_outputs(outputs, inputs, *, main_is_tiff: bool = True) -> None:
     """Refuse outputs that would destroy data or cannot be written (module docstring).
 
     ``outputs``: the main output (``-o``) first, then its side outputs; ``inputs``: every file
-    the command reads.
+    the command reads. ``main_is_tiff``: the main output must be a TIFF (False for a command whose
+    outputs are other files, which checks their suffixes itself).
     """
     outputs = [Path(p) for p in outputs]
     inputs = [Path(p) for p in inputs]
-    check_main_output(outputs[0])
+    if main_is_tiff:
+        check_main_output(outputs[0])
     for out in outputs:
         for source in inputs:
             if _same_file(out, source):
                 what = "-o" if out == outputs[0] else f"the output {out} (beside -o {outputs[0]})"
                 raise ConfigError(f"{what} would overwrite the input {source}; choose another -o")
         if out.is_dir():
-            raise ConfigError(f"cannot write {out}: it is a directory; give a file name ending in .tif")
+            raise ConfigError(f"cannot write {out}: it is a directory; give a file name"
+                              + (" ending in .tif" if main_is_tiff else ""))
     for i, a in enumerate(outputs):
         for b in outputs[i + 1:]:
             if _same_file(a, b):
