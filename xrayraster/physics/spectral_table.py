@@ -22,6 +22,7 @@ measured worst relative error, which a scan records. A table that would need mor
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 from dataclasses import dataclass
 
@@ -107,8 +108,10 @@ def spectral_table(mu, q, longest_mm: float, tolerance: float = TOLERANCE) -> Sp
         raise PhysicsError("spectral_table: the moment weights must be finite and >= 0")
     used = q.max(axis=0) > 0  # empty bins add nothing
     mu, q = mu[:, used], q[:, used]
-    basis = _equivalent_lengths(mu)
-    mu_basis = np.linalg.lstsq(basis.T, mu, rcond=None)[0]  # (r, bins): the basis materials' μ
+    chosen = _basis_materials(mu)
+    mu_basis = mu[chosen]  # (r, bins)
+    basis = np.linalg.lstsq(mu_basis.T, mu.T, rcond=None)[0]  # (r, channels): μ_c = Σ_k basis_kc μ_(basis k)
+    basis[:, chosen] = np.eye(len(chosen))
     lower = np.minimum(basis, 0).sum(axis=1) * longest_mm
     upper = np.maximum(basis, 0).sum(axis=1) * longest_mm
     span = np.where(upper > lower, upper - lower, 1.0)
@@ -125,25 +128,22 @@ def spectral_table(mu, q, longest_mm: float, tolerance: float = TOLERANCE) -> Sp
             gap = table._interpolate(chunk)[0] - _log_moments(chunk, mu_basis, q)
             error = max(error, float(np.expm1(np.abs(gap)).max()))
         if error <= tolerance:
-            return SpectralTable(basis, lower, step, table.log_moments, shape, error)
+            return dataclasses.replace(table, error=error)
         # Linear interpolation errs as step²: aim at half the tolerance, then check again.
         points = int(np.ceil(1 + (points - 1) * np.sqrt(2 * error / tolerance)))
     return None
 
 
-def _equivalent_lengths(mu: np.ndarray) -> np.ndarray:
-    """(r, channels) B with μ_c = Σ_k B_kc μ_(basis k): the first channels that add to the rank
-    are the basis (so B ≥ 0 when the others are scaled copies of them, as yarns of one fibre at
-    other densities are, and every grid point is a real path), the others their combinations."""
+def _basis_materials(mu: np.ndarray) -> list[int]:
+    """The first channels that add to the rank of ``mu``: the basis materials. The others are
+    their combinations, with weights ≥ 0 when they are scaled copies of them (yarns of one fibre
+    at other densities), so every grid point is a real path."""
     scale = np.abs(mu).max() or 1.0
     chosen = []
     for c in range(len(mu)):
         if np.linalg.matrix_rank(mu[chosen + [c]].T, tol=RANK_TOLERANCE * scale) > len(chosen):
             chosen.append(c)
-    chosen = chosen or [0]
-    combination = np.linalg.lstsq(mu[chosen].T, mu.T, rcond=None)[0]  # (r, channels)
-    combination[:, chosen] = np.eye(len(chosen))
-    return combination
+    return chosen or [0]
 
 
 def _grid(lower: np.ndarray, step: np.ndarray, shape: tuple) -> np.ndarray:

@@ -195,7 +195,7 @@ def _joined(provenances: list[dict]) -> dict:
 def _timed(seconds: dict, stage: str):
     start = time.perf_counter()
     yield
-    seconds[stage] = seconds.get(stage, 0.0) + time.perf_counter() - start
+    seconds[stage] += time.perf_counter() - start
 
 
 def _version(name: str) -> str | None:
