@@ -30,7 +30,7 @@ void record_crossing(ivec2 px, uint object, int side, float t) {
     uint value = (side > 0) == (t >= 0.0) ? units : 0u - units;  // exits add t, entries subtract it
     uint pixel = uint(px.y) * uint(u_size.x) + uint(px.x);
     uint npix = uint(u_size.x) * uint(u_size.y);
-    uvec4 info = objects[object];  // channel, active, container channel + 1 (0: none)
+    uvec4 info = object_info(object);  // channel, active, container channel + 1 (0: none)
     atomicAdd(acc[info.x * npix + pixel], value);
     if (info.z != 0u) atomicAdd(acc[(info.z - 1u) * npix + pixel], 0u - value);
 }

@@ -4,8 +4,8 @@
 // = priority, then insertion order), and that object's material gets the length.
 
 #include "crossing_lists.glsl"
+#include "objects.glsl"
 
-layout(std430, binding = BINDING_OBJECTS) readonly buffer Objects { uvec4 objects[]; };  // channel, active, (container channel + 1), -
 layout(std430, binding = BINDING_OUTPUT) writeonly buffer Lengths { float lengths[]; };  // (channel, row, col)
 
 uniform ivec2 u_size;  // (cols, rows)
@@ -21,7 +21,7 @@ void main() {
     for (int c = 0; c < NUM_CHANNELS; c++) acc[c] = 0.0;
     int owner = -1;
     for (int i = 0; i < n; i++) {
-        if (owner >= 0) acc[objects[owner].x] += ts[i] - ts[i - 1];
+        if (owner >= 0) acc[object_info(uint(owner)).x] += ts[i] - ts[i - 1];
         owner = sweep(i);
     }
     int npix = u_size.x * u_size.y;

@@ -20,7 +20,7 @@ void main() {
     uint index = (gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * gl_WorkGroupSize.x + gl_LocalInvocationIndex;
     if (index >= u_num_triangles) return;
     Triangle tri = fetch_triangle(index);
-    if (objects[tri.object].y == 0u) return;  // behind the source in this view
+    if (object_info(tri.object).y == 0u) return;  // behind the source in this view
     vec2 p[3] = vec2[3](to_window(tri.a), to_window(tri.b), to_window(tri.c));
     vec2 lo = min(p[0], min(p[1], p[2]));
     vec2 hi = max(p[0], max(p[1], p[2]));

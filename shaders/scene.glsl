@@ -1,10 +1,12 @@
 // Shared by the crossing stages: the scene's triangles (uploaded once, positions relative to
 // the scene reference point) and the pixel box a triangle's projection can cover.
 
-// Three corners per triangle (xyz mm; the first corner's w holds the object number's bits):
-// a triangle soup, read in order, costs less than indexed vertices gathered at random.
-layout(std430, binding = BINDING_TRIANGLES) readonly buffer Triangles { vec4 corners[]; };
-layout(std430, binding = BINDING_OBJECTS) readonly buffer Objects { uvec4 objects[]; };        // channel, active, container channel + 1, -
+#include "objects.glsl"
+
+// Three texels per triangle, its corners (xyz mm; the first corner's w holds the object number's
+// bits), row by row TEXTURE_WIDTH texels wide: a triangle soup, read in order, costs less than
+// indexed vertices gathered at random, and texels less than storage-buffer elements (objects.glsl).
+layout(binding = TEXTURE_TRIANGLES) uniform sampler2D u_triangles;
 
 uniform mat3x4 u_world_to_pixel;  // transposed 3x4: h = P (x - ref, 1); c' = h.x/h.z, r' = h.y/h.z
 uniform ivec2 u_size;             // detector (cols, rows)
@@ -13,9 +15,13 @@ uniform float u_snap_margin;      // px: eight times the rasteriser's largest ve
 struct Triangle { vec3 a; vec3 b; vec3 c; uint object; };
 
 // Objects are numbered by rank (priority, then insertion), so `object` also orders ownership.
+vec4 corner(uint texel) {
+    return texelFetch(u_triangles, ivec2(texel % uint(TEXTURE_WIDTH), texel / uint(TEXTURE_WIDTH)), 0);
+}
+
 Triangle fetch_triangle(uint index) {
-    vec4 a = corners[3u * index];
-    return Triangle(a.xyz, corners[3u * index + 1u].xyz, corners[3u * index + 2u].xyz, floatBitsToUint(a.w));
+    vec4 a = corner(3u * index);
+    return Triangle(a.xyz, corner(3u * index + 1u).xyz, corner(3u * index + 2u).xyz, floatBitsToUint(a.w));
 }
 
 vec2 to_window(vec3 x) {

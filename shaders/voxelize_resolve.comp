@@ -11,8 +11,8 @@
 // or 2 uint16), so a slab needs a quarter (half) of the memory and read-back of one word each.
 
 #include "crossing_lists.glsl"
+#include "objects.glsl"
 
-layout(std430, binding = BINDING_OBJECTS) readonly buffer Objects { uvec4 objects[]; };  // -, -, -, label (by rank)
 layout(std430, binding = BINDING_OUTPUT) writeonly buffer Labels { uint words[]; };      // (slice / LABELS_PER_WORD, row, col)
 
 uniform ivec2 u_size;   // voxel columns (nx, ny)
@@ -35,7 +35,7 @@ void main() {
     for (int s = 0; s < u_slices; s++) {
         float t = u_t0 + float(s) * u_dt;
         for (; i < n && ts[i] < t; i++) owner = sweep(i);
-        uint label = owner < 0 ? 0u : objects[owner].w;
+        uint label = owner < 0 ? 0u : object_info(uint(owner)).w;
         int lane = s % LABELS_PER_WORD;
         word |= label << (BITS * lane);
         if (lane == LABELS_PER_WORD - 1) {

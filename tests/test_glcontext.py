@@ -56,16 +56,17 @@ def test_shaders_expand_includes_and_defines():
 
 
 def test_binding_slots_are_written_once_in_python():
-    """Every storage block of every stage takes its slot from the table in xrayraster/gl/bindings.py
-    (no literal slot in GLSL), each slot within the 8 that OpenGL 4.3 guarantees, and only
-    accumulators/heads (chosen by the RESOLVE define) share one."""
+    """Every storage block and texture of every stage takes its slot (unit) from the tables in
+    xrayraster/gl/bindings.py (no literal slot in GLSL), each slot within the 8 that OpenGL 4.3
+    guarantees, only accumulators/heads (chosen by the RESOLVE define) share one, and no two
+    textures share a unit."""
     import re
 
     from xrayraster.core.shader_files import read_shader
-    from xrayraster.gl.bindings import BINDINGS
+    from xrayraster.gl.bindings import BINDINGS, TEXTURES
 
     shaders = Path(__file__).resolve().parents[1] / "shaders"
-    blocks = 0
+    blocks = textures = 0
     for path in shaders.iterdir():
         if path.suffix in (".glsl", ".comp", ".vert", ".frag"):
             text = read_shader(path.name)
@@ -73,7 +74,11 @@ def test_binding_slots_are_written_once_in_python():
             for name in re.findall(r"binding = BINDING_(\w+)", text):
                 assert name.lower() in BINDINGS, (path.name, name)
                 blocks += 1
-    assert blocks == 17 and all(0 <= slot < 8 for slot in BINDINGS.values())  # every block in shaders/ counted
+            for name in re.findall(r"binding = TEXTURE_(\w+)", text):
+                assert name.lower() in TEXTURES, (path.name, name)
+                textures += 1
+    assert blocks == 13 and all(0 <= slot < 8 for slot in BINDINGS.values())  # every block in shaders/ counted
+    assert textures == 2 and len(set(TEXTURES.values())) == len(TEXTURES)
     slots = sorted(BINDINGS.values())
     shared = {slot for slot in slots if slots.count(slot) > 1}
     assert {name for name, slot in BINDINGS.items() if slot in shared} == {"accumulators", "heads"}

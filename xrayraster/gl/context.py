@@ -197,10 +197,17 @@ _INCLUDE = re.compile(r'^#include "([^"]+)"\s*$', re.MULTILINE)
 
 
 def shader_source(name: str, defines: dict | None = None) -> str:
-    """GLSL text of ``shaders/<name>`` with ``#include "x"`` expanded, and ``defines`` and the binding
-    slots of :mod:`xrayraster.gl.bindings` inserted."""
-    text = read_shader(name)
-    text = _INCLUDE.sub(lambda m: read_shader(m.group(1)), text)
+    """GLSL text of ``shaders/<name>`` with ``#include "x"`` expanded (nested too, each file once),
+    and ``defines`` and the binding slots of :mod:`xrayraster.gl.bindings` inserted."""
+    included: set[str] = set()
+
+    def expand(match) -> str:
+        if match.group(1) in included:
+            return ""
+        included.add(match.group(1))
+        return _INCLUDE.sub(expand, read_shader(match.group(1)))
+
+    text = _INCLUDE.sub(expand, read_shader(name))
     defines = {**(defines or {}), **binding_defines()}
     head, _, body = text.partition("\n")  # '#version' must stay the first line
     return head + "\n" + "".join(f"#define {k} {v}\n" for k, v in defines.items()) + body

@@ -35,7 +35,7 @@ from ..core.errors import RenderError, SceneError
 from ..core.geometry import VectorGeometry
 from ..core.memory import available_memory
 from ..scene.scene import Scene
-from .bindings import BINDINGS
+from .bindings import BINDINGS, TEXTURE_WIDTH, TEXTURES
 from .context import GLContext
 from .rays import view_rays
 
@@ -58,8 +58,8 @@ class UploadedScene:
     scene: Scene
     revision: int
     ref: np.ndarray  # (3,) mm: the point all uploaded positions are relative to
-    triangles: moderngl.Buffer  # 3 vec4 per triangle: corners (mm, relative to ref), object in w
-    objects: moderngl.Buffer  # uvec4 per object: channel, drawn in this view, container channel + 1, label
+    triangles: moderngl.Texture  # 3 RGBA32F texels per triangle: corners (mm, relative to ref), object in w
+    objects: moderngl.Texture  # RGBA32UI per object: channel, drawn in this view, container channel + 1, label
     large: moderngl.Buffer  # indirect draw command + indices of the triangles pass 2 draws
     large_corners: moderngl.Buffer  # the six window-space corners pass 2 draws for each
     ranked: list  # SceneObjects by rank
@@ -111,13 +111,15 @@ class CrossingEngine:
         ref = bounds.mean(axis=0)
         materials = scene.materials
         ranked = sorted(scene.objects, key=lambda o: o.rank)
-        soups = []
+        num_triangles = sum(len(o.mesh.faces) for o in ranked)
+        texels = _texel_rows(3 * num_triangles, 4, np.float32)  # filled in place: no list of copies
+        soup = texels[:3 * num_triangles].reshape(num_triangles, 3, 4)
+        start = 0
         for number, o in enumerate(ranked):
-            soup = np.zeros((len(o.mesh.faces), 3, 4), np.float32)
-            soup[:, :, :3] = (o.mesh.vertices - ref).astype(np.float32)[o.mesh.faces]
-            soup[:, 0, 3] = np.array(number, np.uint32).view(np.float32)
-            soups.append(soup)
-        num_triangles = sum(len(t) for t in soups)
+            part = soup[start:start + len(o.mesh.faces)]
+            part[:, :, :3] = (o.mesh.vertices - ref).astype(np.float32)[o.mesh.faces]
+            part[:, 0, 3] = np.array(number, np.uint32).view(np.float32)
+            start += len(part)
         # Fixed point: the largest total (one bounding-box diagonal) must stay below 2^31 units.
         diagonal = float(np.linalg.norm(bounds[1] - bounds[0]))
         fixed_scale = 2.0 ** np.floor(np.log2(2.0**30 / diagonal))
@@ -127,8 +129,8 @@ class CrossingEngine:
             scene=scene,
             revision=scene.revision,
             ref=ref,
-            triangles=ctx.buffer(np.concatenate(soups).tobytes()),
-            objects=ctx.buffer(reserve=16 * len(ranked)),
+            triangles=self._texture(texels, "f4", f"the scene's {num_triangles} triangles"),
+            objects=self._texture(_texel_rows(len(ranked), 4, np.uint32), "u4", f"the scene's {len(ranked)} objects"),
             large=ctx.buffer(reserve=4 * (4 + num_triangles)),
             large_corners=ctx.buffer(reserve=6 * 8 * num_triangles),
             ranked=ranked,
@@ -139,6 +141,17 @@ class CrossingEngine:
             corners=corners,
         )
         return self._scene
+
+    def _texture(self, texels: np.ndarray, dtype: str, what: str) -> moderngl.Texture:
+        """Rows of ``TEXTURE_WIDTH`` texels (:func:`_texel_rows`) as a texture read by ``texelFetch``."""
+        rows = len(texels) // TEXTURE_WIDTH
+        limit = int(self.gl.ctx.info["GL_MAX_TEXTURE_SIZE"])
+        if rows > limit:
+            raise RenderError(f"{what} need a texture of {rows} rows of {TEXTURE_WIDTH} texels, more than this GL "
+                              f"driver's {limit}: use a coarser mesh or fewer objects")
+        texture = self.gl.ctx.texture((TEXTURE_WIDTH, rows), 4, texels, dtype=dtype)
+        texture.filter = (moderngl.NEAREST, moderngl.NEAREST)  # no mipmaps: complete for texelFetch
+        return texture
 
     def object_table(self, uploaded: UploadedScene, view: int, skip=None) -> np.ndarray:
         """``(objects, 4)`` uint32 by rank: channel, drawn (0 when wholly behind the source or
@@ -182,7 +195,9 @@ class CrossingEngine:
 
     def _record(self, uploaded: UploadedScene, view: int, table: np.ndarray, defines: dict, uniforms: dict) -> None:
         """Pass 1 (compute: small triangles) then pass 2 (rasteriser: the large ones it listed)."""
-        uploaded.objects.write(table.astype(np.uint32).tobytes())
+        texels = _texel_rows(len(table), 4, np.uint32)
+        texels[:len(table)] = table
+        uploaded.objects.write(texels)
         rays = view_rays(self.geometry, view, uploaded.ref)
         rows, cols = self.shape
         defines = {**defines, "MAX_SMALL_PIXELS": self.small_triangle_pixels}
@@ -201,7 +216,9 @@ class CrossingEngine:
         }
         for prog in (small, large):
             set_uniforms(prog, uniforms)
-        for name in ("triangles", "objects", "large", "large_corners"):
+        for name in ("triangles", "objects"):
+            getattr(uploaded, name).use(TEXTURES[name])
+        for name in ("large", "large_corners"):
             getattr(uploaded, name).bind_to_storage_buffer(BINDINGS[name])
         uploaded.large.write(np.array([0, 1, 0, 0], np.uint32).tobytes())  # empty draw command
         groups = (uploaded.num_triangles + 63) // 64
@@ -258,7 +275,7 @@ class CrossingEngine:
         while True:
             prog = self.gl.compute(shader, {**defines, "MAX_CROSSINGS": self.max_crossings})
             set_uniforms(prog, uniforms)
-            uploaded.objects.bind_to_storage_buffer(BINDINGS["objects"])
+            uploaded.objects.use(TEXTURES["objects"])
             for name in ("heads", "nodes"):
                 self._buffers[name].bind_to_storage_buffer(BINDINGS[name])
             counters.bind_to_storage_buffer(BINDINGS["counters"])
@@ -354,6 +371,12 @@ class CrossingLists:
 
     def __exit__(self, *exc) -> None:
         self.release()
+
+
+def _texel_rows(count: int, channels: int, dtype) -> np.ndarray:
+    """Zeros for ``count`` texels, ``(rows × TEXTURE_WIDTH, channels)``: whole texture rows."""
+    rows = max(1, -(-count // TEXTURE_WIDTH))
+    return np.zeros((rows * TEXTURE_WIDTH, channels), dtype)
 
 
 def set_uniforms(prog, values: dict) -> None:

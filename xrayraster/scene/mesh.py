@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 import warnings
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -25,10 +26,13 @@ class Mesh:
     vertices: np.ndarray
     faces: np.ndarray
 
-    @property
+    @cached_property
     def bounds(self) -> np.ndarray:
-        """``(2, 3)`` min and max corners, mm."""
-        return np.stack([self.vertices.min(axis=0), self.vertices.max(axis=0)])
+        """``(2, 3)`` min and max corners, mm (read-only; computed once: the vertices are read-only too,
+        and a renderer asks every view)."""
+        corners = np.stack([self.vertices.min(axis=0), self.vertices.max(axis=0)])
+        corners.setflags(write=False)
+        return corners
 
     @property
     def volume(self) -> float:
