@@ -83,7 +83,8 @@ def test_zero_distortion_is_the_regular_weave_bit_for_bit():
     for name, (nodes, outline, ends) in expected.items():
         yarn, mesh = got[name]
         assert np.array_equal(yarn.nodes, nodes) and yarn.section_scale is None
-        ref = _clip(yarn_mesh(nodes, outline, 2.0, end_tangents=ends), clip).to_mesh64()
+        ref = _clip(yarn_mesh(nodes, outline, 2.0, end_tangents=ends, sagitta_mm=sample.path_sagitta_mm),
+                    clip).to_mesh64()
         assert mesh.vertices.tobytes() == np.asarray(ref.vert_properties)[:, :3].tobytes()
         assert mesh.faces.tobytes() == np.asarray(ref.tri_verts, dtype=np.int64).tobytes()
 

@@ -150,6 +150,7 @@ def test_no_binder_is_cut_by_the_top_or_bottom_face(sample_2x1):
         assert len(binders) == 16 * s.cells[0]
         for yarn, mesh in binders:
             assert mesh.bounds[0, 2] > lo[2] + 0.05 and mesh.bounds[1, 2] < hi[2] - 0.05
-            tube = yarn_mesh(yarn.nodes, yarn.outline, s.samples_per_mm, end_tangents=yarn.end_tangents)
+            tube = yarn_mesh(yarn.nodes, yarn.outline, s.samples_per_mm, end_tangents=yarn.end_tangents,
+                             sagitta_mm=s.path_sagitta_mm)
             clipped = solid(tube) ^ tall
             assert abs(mesh.volume - clipped.volume()) <= 1e-9 * mesh.volume

@@ -55,10 +55,16 @@ from .sections import (
     rounded_rectangle_area,
 )
 
-__all__ = ["CubicSpline3", "ellipse", "ellipse_area", "lenticular", "lenticular_area", "polygon_area",
+__all__ = ["CubicSpline3", "adaptive_params", "bend_sagitta_mm", "ellipse", "ellipse_area", "lenticular", "lenticular_area", "polygon_area",
            "power_ellipse", "power_ellipse_area", "rotation_minimising_frames", "rounded_rectangle",
            "rounded_rectangle_area", "sample_path", "section_outlines", "smooth_profile", "sweep",
            "yarn_mesh"]
+
+
+#: :func:`adaptive_params`: its table's samples per uniform step (the densest samples' spacing).
+TABLE_PER_STEP = 2
+#: :func:`adaptive_params`: the most uniform steps between two samples.
+SPARSEST_STEPS = 16
 
 
 # --------------------------------------------------------------------------------------------
@@ -157,11 +163,69 @@ def sample_path(spline: CubicSpline3, samples_per_mm: float, *, table_per_interv
     intervals = max(1, math.ceil(arc[-1] * rate))
     params = np.interp(np.linspace(0.0, arc[-1], intervals + 1), arc, fine)
     params[0], params[-1] = spline.knots[0], spline.knots[-1]
+    return (*_on_spline(spline, params), params)
+
+
+def _on_spline(spline: CubicSpline3, params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Points and unit tangents of ``spline`` at ``params``; a zero tangent is refused."""
     tangents = spline(params, 1)
     speed = np.linalg.norm(tangents, axis=1)
     if np.any(speed <= 0):
         raise WeaveError("the path has a cusp (zero tangent); move the nodes apart or clamp its ends")
-    return spline(params), tangents / speed[:, None], params
+    return spline(params), tangents / speed[:, None]
+
+
+def adaptive_params(spline: CubicSpline3, outline, sagitta_mm: float, rate_per_mm: float, *, up=(0.0, 0.0, 1.0),
+                    section_scale=None, section_rotation_deg=None) -> np.ndarray:
+    """Path parameters of samples spaced so that no ring-to-ring chord of the swept tube misses the
+    smooth one by more than ``sagitta_mm`` (to leading order): dense where the tube bends or its
+    section changes, sparse where it runs straight and uniform. ``(n,)``, both ends included.
+
+    Every point of the outline (``(k, 2)``, scaled and turned along the path by ``section_scale``
+    and ``section_rotation_deg`` as :func:`yarn_mesh` does) traces a fibre p(s) over the centre
+    line's arc length s. A chord of length h across it misses it by ``h² |p''⊥| / 8``, where ``p''⊥``
+    is p'' across the fibre's direction (bends, section scaling and turning all enter it), so the
+    sample density ``ρ(s) = √(max over the fibres |p''⊥| / (8 sagitta))`` holds that sagitta; the
+    samples equidistribute ∫ρ ds. ``rate_per_mm`` is the uniform rate this replaces
+    (:func:`sample_path`): p'' comes from second differences on a table of :data:`TABLE_PER_STEP`
+    samples per uniform step ``1 / rate_per_mm``, and samples are never more than
+    :data:`SPARSEST_STEPS` uniform steps apart (a tube without any curvature still follows its
+    path's small turns).
+    """
+    rate = float(rate_per_mm)
+    points, tangents, params = sample_path(spline, TABLE_PER_STEP * rate)
+    frames = rotation_minimising_frames(points, tangents, up)
+    shape = np.asarray(outline, dtype=np.float64)
+    if section_scale is not None:
+        shape = section_outlines(shape, smooth_profile(spline.knots, section_scale, params),
+                                 smooth_profile(spline.knots, section_rotation_deg, params))
+    fibres = points[:, None] + shape[..., :1] * frames[:, None, 1] + shape[..., 1:] * frames[:, None, 2]
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+    if len(arc) < 3:
+        return params
+    before, after = np.diff(arc)[:-1, None, None], np.diff(arc)[1:, None, None]
+    back, ahead = fibres[1:-1] - fibres[:-2], fibres[2:] - fibres[1:-1]
+    second = 2.0 * (ahead / after - back / before) / (before + after)  # p'' on an uneven grid
+    direction = back + ahead
+    direction /= np.linalg.norm(direction, axis=-1, keepdims=True)
+    across = second - np.sum(second * direction, axis=-1, keepdims=True) * direction
+    bend = np.linalg.norm(across, axis=-1).max(axis=1)
+    bend = np.concatenate([bend[:1], bend, bend[-1:]])
+    density = np.maximum(np.sqrt(bend / (8.0 * float(sagitta_mm))), rate / SPARSEST_STEPS)  # samples per mm
+    count = np.concatenate([[0.0], np.cumsum(np.diff(arc) * (density[1:] + density[:-1]) / 2)])
+    intervals = max(1, math.ceil(count[-1] * (1.0 - 1e-12)))
+    out = np.interp(np.linspace(0.0, count[-1], intervals + 1), count, params)
+    out[0], out[-1] = params[0], params[-1]
+    return out
+
+
+def bend_sagitta_mm(radius_mm: float, spacing_mm: float, reach_mm: float) -> float:
+    """``(R + d)(1 − cos(h / 2R))``: how far chords ``h`` apart along a bend of radius R miss the fibre
+    d outside it (0 for R = inf). Unchecked: :func:`~xrayraster.weave.tessellation.path_error_mm`
+    checks its inputs and explains the terms."""
+    if radius_mm == math.inf:
+        return 0.0
+    return 2.0 * (radius_mm + reach_mm) * math.sin(spacing_mm / (4.0 * radius_mm)) ** 2  # no cancellation
 
 
 def smooth_profile(knots, values, t) -> np.ndarray:
@@ -224,26 +288,40 @@ def rotation_minimising_frames(points, tangents, up=(0.0, 0.0, 1.0)) -> np.ndarr
             raise WeaveError(f"up {tuple(up_vec)} is parallel to the path's first tangent {tuple(t[0])}; "
                              "choose an up vector across the yarn's start")
     r = r / np.linalg.norm(r)
-    normals = np.empty((n, 3))
-    normals[0] = r
-    for i, v1 in enumerate(np.diff(x, axis=0)):
-        c1 = v1.dot(v1)
-        if c1 == 0:
-            normals[i + 1] = r
-            continue
-        r_l = r - (2 / c1) * v1.dot(r) * v1
-        t_l = t[i] - (2 / c1) * v1.dot(t[i]) * v1
-        v2 = t[i + 1] - t_l
-        c2 = v2.dot(v2)
-        r = r_l - (2 / c2) * v2.dot(r_l) * v2 if c2 > 0 else r_l
-        r = r - r.dot(t[i + 1]) * t[i + 1]  # removes rounding drift only (about 1e-16)
-        r = r / math.sqrt(r.dot(r))
-        normals[i + 1] = r
+    # Step i reflects in the plane normal to v1 (the chord), then in the one normal to v2 (the
+    # reflected tangent's miss): a fixed linear map M_i, whatever r is, so the normals are
+    # M_{i-1}…M_0 r, their prefix products (a zero chord or miss reflects nothing).
+    v1 = np.diff(x, axis=0)
+    first = _reflections(v1)
+    t_l = np.einsum("nij,nj->ni", first, t[:-1])
+    maps = _reflections(t[1:] - t_l) @ first
+    normals = np.concatenate([r[None], _prefix_products(maps) @ r])
+    normals -= np.einsum("ij,ij->i", normals, t)[:, None] * t  # rounding drift only (about 1e-16 a step)
+    normals /= np.linalg.norm(normals, axis=1)[:, None]
     frames = np.empty((n, 3, 3))
     frames[:, 0] = t
     frames[:, 2] = normals
     frames[:, 1] = np.cross(normals, t)
     return frames
+
+
+def _reflections(v: np.ndarray) -> np.ndarray:
+    """``(n, 3, 3)`` Householder reflections I − 2 v vᵀ / vᵀv in the planes normal to ``v`` ``(n, 3)``;
+    the identity where v is zero."""
+    c = np.einsum("ij,ij->i", v, v)
+    scale = np.divide(2.0, c, out=np.zeros_like(c), where=c > 0)
+    return np.eye(3) - scale[:, None, None] * v[:, :, None] * v[:, None, :]
+
+
+def _prefix_products(maps: np.ndarray) -> np.ndarray:
+    """``(n, 3, 3)``: entry k is maps[k] @ maps[k − 1] @ … @ maps[0] (a doubling scan: log2 n
+    vectorised steps instead of n small ones)."""
+    out = maps.copy()
+    step = 1
+    while step < len(out):
+        out[step:] = out[step:] @ out[:-step]
+        step *= 2
+    return out
 
 
 # --------------------------------------------------------------------------------------------
@@ -364,10 +442,11 @@ def _span_near(points, frames, outlines, box) -> slice:
 
 
 def yarn_mesh(nodes, outline, samples_per_mm: float, up=(0.0, 0.0, 1.0), end_tangents=None,
-              section_scale=None, section_rotation_deg=None, within=None) -> trimesh.Trimesh:
+              section_scale=None, section_rotation_deg=None, within=None, sagitta_mm=None) -> trimesh.Trimesh:
     """A closed yarn: ``outline`` swept along the natural (or clamped) C² spline through ``nodes``.
 
-    The path is sampled at ``samples_per_mm`` along arc length, framed by rotation-minimising
+    The path is sampled at ``samples_per_mm`` along arc length (or, given ``sagitta_mm``, where
+    :func:`adaptive_params` puts the samples for that largest chord error), framed by rotation-minimising
     frames whose height axis starts along ``up``, swept and capped. ``section_scale`` ``(m, 2)``
     (width and height factors) and ``section_rotation_deg`` ``(m,)`` (about the tangent), one per
     node, vary the section along the yarn: :func:`smooth_profile` carries them to every sample
@@ -387,7 +466,12 @@ def yarn_mesh(nodes, outline, samples_per_mm: float, up=(0.0, 0.0, 1.0), end_tan
         if not (np.all(np.isfinite(scale)) and np.all(scale > 0) and np.all(np.isfinite(angle))):
             raise WeaveError("section_scale must be positive and finite, section_rotation_deg finite")
     spline = CubicSpline3(nodes, end_tangents)
-    points, tangents, params = sample_path(spline, samples_per_mm)
+    if sagitta_mm:
+        params = adaptive_params(spline, outline, sagitta_mm, samples_per_mm, up=up, section_scale=section_scale,
+                                 section_rotation_deg=section_rotation_deg)
+        points, tangents = _on_spline(spline, params)
+    else:
+        points, tangents, params = sample_path(spline, samples_per_mm)
     frames = rotation_minimising_frames(points, tangents, up)
     if section_scale is not None:
         outline = section_outlines(outline, smooth_profile(spline.knots, scale, params),

@@ -41,10 +41,10 @@ import numpy as np
 
 from ..core.errors import WeaveError
 from ..core.validate import show
-from .sample import Sample, section_outline
+from .sample import binder_bend_radius_mm, binder_curvature, section_outline
 from .sections import _corner_radius, _lens_arc
 from .spec import Section, UnitCell
-from .sweep import CubicSpline3
+from .sweep import bend_sagitta_mm
 
 __all__ = [
     "area_error_mm2",
@@ -55,10 +55,6 @@ __all__ = [
     "resolution_for",
     "section_error_mm",
 ]
-
-#: Points per node interval at which :func:`binder_curvature` evaluates the spline's curvature.
-CURVATURE_SAMPLES = 64
-
 
 def _number(name: str, value, *, zero: bool = False, infinite: bool = False) -> float:
     """``value`` as a float > 0 (>= 0 with ``zero``; ``inf`` allowed with ``infinite``), else a WeaveError."""
@@ -160,38 +156,7 @@ def path_error_mm(min_bend_radius_mm: float, samples_per_mm: float, half_extent_
     if spacing > math.pi * radius:
         raise WeaveError(f"samples_per_mm ({show(samples_per_mm)}) puts samples {spacing:.4g} mm apart, more than half a "
                          f"turn of the {radius:.4g} mm bend; use samples_per_mm >= {1 / (math.pi * radius):.4g}")
-    return 2.0 * (radius + reach) * math.sin(spacing / (4.0 * radius)) ** 2  # (R + d)(1 − cos(h/2R)), no cancellation
-
-
-def binder_curvature(cell: UnitCell) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Per binder of the cell: arc length (mm) and curvature (1/mm) along its centre line inside the cell.
-
-    The binders of a 1 × 1 :class:`Sample` (their C² splines, node plateaus and clamped ends
-    included), curvature ``|r′ × r″| / |r′|³`` at :data:`CURVATURE_SAMPLES` points per node
-    interval, kept where the path lies inside the cell (``0 ≤ y ≤ size_y``, what the clip keeps);
-    arc length from the first point kept, along the polyline of those points.
-    """
-    if not isinstance(cell, UnitCell):
-        raise WeaveError(f"cell must be a UnitCell, got {show(cell)}")
-    out = []
-    for yarn in Sample(cell).yarns():
-        if yarn.kind != "binder":
-            continue
-        spline = CubicSpline3(yarn.nodes, yarn.end_tangents)
-        t = np.linspace(0.0, spline.length_parameter, CURVATURE_SAMPLES * (len(spline.knots) - 1) + 1)
-        points, first, second = spline(t), spline(t, 1), spline(t, 2)
-        inside = (points[:, 1] >= 0) & (points[:, 1] <= cell.size[1])  # y grows along a binder: one run
-        kappa = np.linalg.norm(np.cross(first, second), axis=1) / np.linalg.norm(first, axis=1) ** 3
-        step = np.linalg.norm(np.diff(points[inside], axis=0), axis=1)
-        out.append((np.concatenate([[0.0], np.cumsum(step)]), kappa[inside]))
-    return out
-
-
-def binder_bend_radius_mm(cell: UnitCell) -> float:
-    """Smallest bend radius (mm) of the cell's binder centre lines inside the cell (:func:`binder_curvature`);
-    ``inf`` when no binder bends."""
-    curvature = max(float(kappa.max()) for _, kappa in binder_curvature(cell))
-    return 1.0 / curvature if curvature > 0 else math.inf
+    return bend_sagitta_mm(radius, spacing, reach)
 
 
 def resolution_for(cell: UnitCell, tolerance_mm: float) -> tuple[int, float]:

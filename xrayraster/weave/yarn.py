@@ -44,10 +44,11 @@ class Yarn:
     section_scale: np.ndarray | None = None  # (m, 2) width/height factors per node, or None (constant)
     section_rotation_deg: np.ndarray | None = None  # (m,) section rotation per node, or None
 
-    def mesh(self, samples_per_mm: float, within=None) -> trimesh.Trimesh:
-        """The closed, unclipped tube of this yarn (:func:`~xrayraster.weave.sweep.yarn_mesh`, ``within`` a box)."""
+    def mesh(self, samples_per_mm: float, within=None, sagitta_mm=None) -> trimesh.Trimesh:
+        """The closed, unclipped tube of this yarn (:func:`~xrayraster.weave.sweep.yarn_mesh`, ``within`` a box,
+        ``sagitta_mm`` the largest chord error of adaptive path samples)."""
         return yarn_mesh(self.nodes, self.outline, samples_per_mm, end_tangents=self.end_tangents,
                          section_scale=self.section_scale, section_rotation_deg=self.section_rotation_deg,
-                         within=within)
+                         within=within, sagitta_mm=sagitta_mm)
 
 
