@@ -55,6 +55,24 @@ def test_polychromatic_transmission_equals_the_float64_definition(channels):
     np.testing.assert_allclose(physics.normalise(got, flat, 0.0, 1e-300).transmission, want_t, rtol=1e-5)
 
 
+def test_pixels_that_miss_every_object_are_the_open_beam_bit_for_bit():
+    """Rays through nothing skip the spectral sum: their signal is the flat the radiograph divides
+    by, to the last bit (line integral exactly 0), and the crossed pixels still equal the definition."""
+    rng = np.random.default_rng(4)
+    lengths = rng.uniform(0, 8, (2, 12, 9)).astype(np.float32)
+    lengths[:, :, :4] = 0.0  # air
+    lengths[0, 0, 0] = 1e-30  # a graze: crossed, however little
+    mu = np.stack([mu_like(1.0), mu_like(2.7)])
+    factor = rng.uniform(0.5, 1.0, (12, 9))
+    weights = ENERGIES * 0.8
+    got = physics.expected_signal(lengths, mu, PHOTONS, weights, factor, threads=2)
+    open_beam = (PHOTONS * weights).sum() * factor  # the flat as radiograph._exact_flat makes it
+    air = ~lengths.any(axis=0)
+    assert np.array_equal(got[air], open_beam[air]) and air.sum() == 12 * 4 - 1
+    np.testing.assert_allclose(got[~air], reference_signal(lengths, mu, PHOTONS, weights, factor)[~air], rtol=1e-10)
+    assert np.all(physics.normalise(got, open_beam, 0.0, 1e-300).line_integral[air] == 0.0)
+
+
 def test_photon_factor_follows_inverse_square_and_obliquity():
     geom = xr.ConeBeamGeometry(500.0, 1000.0, (5, 7), 40.0, [0.3])
     factor = physics.pixel_photon_factor(geom, 0)
