@@ -1,6 +1,6 @@
 // The scene's per-object table, by rank (uploaded each view): channel, drawn in this view,
 // container channel + 1 (0: none), label. A texture, not a storage buffer: llvmpipe reads texels
-// several times faster than SSBO elements (measured: docs/architecture.md, "GPU data").
+// several times faster than SSBO elements (measured: xrayraster/gl/bindings.py).
 layout(binding = TEXTURE_OBJECTS) uniform usampler2D u_objects;
 
 uvec4 object_info(uint rank) {
