@@ -251,6 +251,21 @@ def wang_weight(t: np.ndarray, overlap: float, long_side: float) -> np.ndarray:
     return np.where(x >= 1, 1.0, np.where(x <= -1, 0.0, np.sin(0.25 * math.pi * (1 + np.clip(x, -1, 1))) ** 2))
 
 
+def virtual_detector(views, shape, displaced: bool) -> tuple[int, int]:
+    """(before, after): zero columns a displaced detector's rows get on each side before the ramp
+    filter, so the short side reaches as far from the axis as the long one, whose mirrored lines
+    it stands for; the backprojection reads the filtered values there. (0, 0) otherwise."""
+    if not displaced:
+        return 0, 0
+    before = after = 0
+    for view in views:
+        _, t = view.middle_row_lines(shape)
+        step = np.abs(np.diff(t)).min()
+        before = max(before, math.ceil((abs(t[-1]) - abs(t[0])) / step))
+        after = max(after, math.ceil((abs(t[0]) - abs(t[-1])) / step))
+    return before, after
+
+
 def redundancy_weights(views, shape, scan: str):
     """(views, cols) redundancy weights, (views,) angular cells, and whether the scan is full."""
     theta = np.array([view.theta for view in views])
@@ -302,27 +317,31 @@ def _voxel_centres(volume) -> np.ndarray:
 
 
 def filtered_projections(projections, geometry, window="ram-lak", cutoff=1.0, scan="auto"):
-    """(views, rows, cols) cosine- and redundancy-weighted, ramp-filtered projections (float64),
-    the per-view objects and their angular cells."""
+    """(views, rows, before + cols + after) cosine- and redundancy-weighted, ramp-filtered
+    projections (float64) on the virtual detector of :func:`virtual_detector`, the per-view
+    objects, their angular cells and ``before``."""
     vec = geometry.to_vec()  # ConeBeam-, ParallelBeam- or VectorGeometry: (views, 12) float64 in .array
     cone = vec.beam == "cone"
     views = [_View(row, cone) for row in vec.array]
     shape = vec.detector_shape
     pitch = float(np.linalg.norm(views[0].u))
-    redundancy, cells, _ = redundancy_weights(views, shape, scan)
+    redundancy, cells, full = redundancy_weights(views, shape, scan)
+    before, after = virtual_detector(views, shape, full and not np.all(redundancy == 0.5))
     p = np.asarray(projections, dtype=np.float64)
-    out = np.empty(p.shape)
+    out = np.empty((p.shape[0], p.shape[1], before + p.shape[2] + after))
     for i, view in enumerate(views):
-        out[i] = ramp_filter_rows(p[i] * view.cosine(shape) * redundancy[i][None, :], pitch, window, cutoff)
-    return out, views, cells
+        weighted = np.pad(p[i] * view.cosine(shape) * redundancy[i][None, :], ((0, 0), (before, after)))
+        out[i] = ramp_filter_rows(weighted, pitch, window, cutoff)
+    return out, views, cells, before
 
 
 def fdk_reference(projections, geometry, volume, window="ram-lak", cutoff=1.0, scan="auto") -> np.ndarray:
     """The reconstruction, float64 (z, y, x), mm⁻¹ for line integrals in ``projections``."""
-    filtered, views, cells = filtered_projections(projections, geometry, window, cutoff, scan)
+    filtered, views, cells, before = filtered_projections(projections, geometry, window, cutoff, scan)
+    shape = np.shape(projections)[1:]
     x = _voxel_centres(volume)
     out = np.zeros(volume.shape)
     for q, view, cell in zip(filtered, views, cells):
-        row, col, w = view.detector_coordinates(x, filtered.shape[1:])
-        out += cell * view.R / view.D / w**2 * bilinear(q, row, col)
+        row, col, w = view.detector_coordinates(x, shape)
+        out += cell * view.R / view.D / w**2 * bilinear(q, row, col + before)
     return out

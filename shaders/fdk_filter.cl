@@ -29,13 +29,15 @@ inline float pre_weight(__global const float4* geo, __global const float* redund
 }
 
 __kernel void filter_rows(__global const float* projections,  // (views, rows, cols) line integrals
-                          __global float* filtered,           // (views, rows + 2, cols + 2) or COLUMN_MAJOR; ring kept zero
+                          __global float* filtered,           // (views, rows + 2, out_cols + 2) or COLUMN_MAJOR; ring kept zero
                           __global const float* redundancy,   // (views, cols)
                           __global const float4* geo,         // (views, 4) see pre_weight
                           __global const float* response,     // (n) bit-reversed, 1/n included
                           __global const float2* twiddle,     // (n/2) exp(−2πik/n)
                           BUF float2* scratch,                // n per work-group (local) or per pair (global)
-                          int rows, int cols, int n, int cone) {
+                          int rows, int cols, int lead, int out_cols, int n, int cone) {
+    // Row pixel k sits at k + lead of the padded row, and the output keeps out_cols of it from 0:
+    // the detector's columns and the virtual ones around them (FDKViews.lead, trail).
     const int pair = get_group_id(0);
     const int pairs_per_view = (rows + 1) / 2;
     const int view = pair / pairs_per_view;
@@ -50,9 +52,10 @@ __kernel void filter_rows(__global const float* projections,  // (views, rows, c
     __global const float* in0 = projections + ((size_t)view * rows + r0) * cols;
     for (int k = lid; k < n; k += lsize) {
         float2 x = (float2)(0.0f, 0.0f);
-        if (k < cols) {
-            x.x = in0[k] * pre_weight(geo, redundancy, view, r0, k, rows, cols, cone);
-            if (r1 < rows) x.y = in0[cols + k] * pre_weight(geo, redundancy, view, r1, k, rows, cols, cone);
+        const int c = k - lead;
+        if (c >= 0 && c < cols) {
+            x.x = in0[c] * pre_weight(geo, redundancy, view, r0, c, rows, cols, cone);
+            if (r1 < rows) x.y = in0[cols + c] * pre_weight(geo, redundancy, view, r1, c, rows, cols, cone);
         }
         buf[k] = x;
     }
@@ -89,10 +92,10 @@ __kernel void filter_rows(__global const float* projections,  // (views, rows, c
 #ifdef COLUMN_MAJOR
     const int row_step = 1, col_step = rows + 2;
 #else
-    const int row_step = cols + 2, col_step = 1;
+    const int row_step = out_cols + 2, col_step = 1;
 #endif
-    __global float* out = filtered + (size_t)view * (rows + 2) * (cols + 2) + (r0 + 1) * row_step + col_step;
-    for (int k = lid; k < cols; k += lsize) {
+    __global float* out = filtered + (size_t)view * (rows + 2) * (out_cols + 2) + (r0 + 1) * row_step + col_step;
+    for (int k = lid; k < out_cols; k += lsize) {
         out[k * col_step] = buf[k].x;
         if (r1 < rows) out[k * col_step + row_step] = buf[k].y;
     }

@@ -362,3 +362,28 @@ def test_a_far_source_approaches_parallel_beam_fbp(cl):
     b = fdk(project([BALL], parallel), parallel, SMALL_VOLUME, context=cl).data / 10
     assert np.abs(a - b).max() <= 5e-3 * MU
     assert abs(a[10, 12, 14] - b[10, 12, 14]) <= 1e-5 * MU and abs(a[10, 12, 14] / MU - 1) < 0.005
+
+
+@pytest.mark.parametrize("offset_mm", [60.0, -60.0, -73.0, 77.0])
+def test_a_displaced_detector_reconstructs_as_well_as_a_centred_one(cl, offset_mm):
+    """RTK's displaced-detector test at half its size (source 600 mm, detector 1200 mm, 90 views,
+    64² pixels of 8 mm, a 128 mm Shepp–Logan head, 64³ voxels of 4 mm), with the detector moved
+    sideways as RTK moves it (±120 mm, origins −400 and −100 mm, all halved): the filtered rows
+    continue on virtual columns past the short edge. Error per voxel within 10 % of the centred
+    scan's (measured 7–8 %: each ray is measured once, not twice), and beyond the radius both sides
+    see the bias within 0.004 of the centred scan's (measured ≤ 0.001; without the virtual
+    columns +0.009 to +0.014 on a density of 1)."""
+    phantom = shepp_logan_3d(128.0, 1.0)
+    volume = xr.VolumeGeometry((64, 64, 64), 4.0)
+    truth = voxel_values(phantom, volume)
+
+    def error(offset):
+        geometry = xr.ConeBeamGeometry(600.0, 1200.0, (64, 64), 8.0, xr.full_circle(90), detector_offset=(0.0, offset))
+        got = fdk(project(phantom, geometry).astype(np.float32), geometry, volume, context=cl).data / 10.0  # mm⁻¹
+        return got - truth
+
+    centred, displaced = error(0.0), error(offset_mm)
+    assert np.abs(displaced).mean() <= 1.10 * np.abs(centred).mean()
+    y, x = np.meshgrid(*(np.arange(64) - 31.5,) * 2, indexing="ij")
+    outer = (np.hypot(x, y) * 4.0 > 80.0) & (np.hypot(x, y) * 4.0 < 120.0)  # beyond the overlap, inside the head
+    assert abs(displaced[28:36, outer].mean() - centred[28:36, outer].mean()) < 0.004

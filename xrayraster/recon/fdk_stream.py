@@ -113,7 +113,7 @@ class FDKStream:
         self.geometry, self.volume = geometry, volume
         self.vector_geometry = vec = as_vector_geometry(geometry)
         self.views = fdk_views(vec, volume, scan)
-        response = ramp_response(vec.detector_shape[1], self.views.pixel_pitch, filter, cutoff)
+        response = ramp_response(self.views.filtered_cols, self.views.pixel_pitch, filter, cutoff)
         self._provenance = {"method": "FDK" if vec.beam == "cone" else "FBP", "geometry": geometry.to_dict(),
                             "filter": filter, "cutoff": cutoff, "scan": scan}
         self.ctx = context or CLContext(device)
@@ -239,11 +239,11 @@ class FDKStream:
         self._n_fft = n
         self._geo = _view_geometry(self.views)
         self._local_size = int(min(self.ctx.info.max_work_group, n // 2, 256))
-        self._view_bytes = (rows + 2) * (cols + 2) * 4
+        self._view_bytes = (rows + 2) * (self.views.filtered_cols + 2) * 4
         self._local_scratch = cl.LocalMemory(n * 8)
 
     def _filter(self, batch: range, raw: np.ndarray):
-        """One device buffer of the batch's filtered views, (views, rows + 2, cols + 2) float32."""
+        """One device buffer of the batch's filtered views, (views, rows + 2, filtered_cols + 2) float32."""
         import pyopencl as cl
 
         ctx, n, count = self.ctx, self._n_fft, len(batch)
@@ -258,7 +258,8 @@ class FDKStream:
         scratch = ctx.buffer(count * pairs * n * 8) if self.plan.global_scratch else self._local_scratch
         self._filter_kernel(ctx.queue, (count * pairs * self._local_size,), (self._local_size,), raw_dev, out_dev,
                             red_dev, geo_dev, self._response, self._twiddle, scratch, np.int32(rows), np.int32(cols),
-                            np.int32(n), np.int32(self.views.beam == "cone"))
+                            np.int32(self.views.lead), np.int32(self.views.filtered_cols), np.int32(n),
+                            np.int32(self.views.beam == "cone"))
         for buffer in (raw_dev, red_dev, geo_dev) + ((scratch,) if self.plan.global_scratch else ()):
             buffer.release()  # after the kernel: OpenCL keeps them alive until it has run
         return out_dev
@@ -300,11 +301,12 @@ class FDKStream:
         return slab
 
     def _backproject(self, batch: range, filtered, slab, z0: int) -> None:
-        rows, cols = self.views.detector_shape
+        rows, cols = self.views.detector_shape[0], self.views.filtered_cols
         nz, ny, nx = self.volume.shape
         depth = min(self.plan.slab, nz - z0)
         matrices = self.views.matrices[batch.start : batch.stop].copy()
         matrices[:, :, 3] += z0 * matrices[:, :, 2]  # slab-local k
+        matrices[:, 0] += self.views.lead * matrices[:, 2]  # column of the filtered row: virtual ones first
         m_dev = self.ctx.buffer(matrices.reshape(-1, 12).astype(np.float32), "r")
         s_dev = self.ctx.buffer(self.views.scale[batch.start : batch.stop].astype(np.float32), "r")
         size = (_round_up(nx, TILE[0]), _round_up(ny, TILE[1]), -(-depth // self._zchunk))
@@ -331,7 +333,7 @@ def plan_memory(views: FDKViews, volume: VolumeGeometry, n_fft: int, device_byte
     num_views = len(views.scale)
     rows, cols = views.detector_shape
     nz, ny, nx = volume.shape
-    filtered = (rows + 2) * (cols + 2) * 4
+    filtered = (rows + 2) * (views.filtered_cols + 2) * 4
     plane = ny * nx * 4
     global_scratch = n_fft * 8 > local_bytes // 2
     pairs = (rows + 1) // 2
