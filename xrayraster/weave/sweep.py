@@ -199,7 +199,7 @@ def adaptive_params(spline: CubicSpline3, outline, sagitta_mm: float, rate_per_m
     if section_scale is not None:
         shape = section_outlines(shape, smooth_profile(spline.knots, section_scale, params),
                                  smooth_profile(spline.knots, section_rotation_deg, params))
-    fibres = points[:, None] + shape[..., :1] * frames[:, None, 1] + shape[..., 1:] * frames[:, None, 2]
+    fibres = _rings(points, shape, frames)
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
     if len(arc) < 3:
         return params
@@ -400,9 +400,7 @@ def sweep(path_points, outline, frames, cap: bool = True):
     _check_bends(points, frames, shapes)
 
     n, k = shapes.shape[:2]
-    rings = (points[:, None, :] + shapes[:, :, 0, None] * frames[:, None, 1]
-             + shapes[:, :, 1, None] * frames[:, None, 2])
-    vertices = rings.reshape(-1, 3)
+    vertices = _rings(points, shapes, frames).reshape(-1, 3)
     i = np.arange(n - 1)[:, None]
     j = np.arange(k)[None, :]
     a = i * k + j
@@ -411,9 +409,7 @@ def sweep(path_points, outline, frames, cap: bool = True):
     d = b + k
     faces = [np.stack([a, b, d], axis=-1).reshape(-1, 3), np.stack([a, d, c], axis=-1).reshape(-1, 3)]
     if cap:
-        centres = np.array(ends)
-        ends = (np.array([points[0], points[-1]]) + centres[:, :1] * frames[[0, -1], 1]
-                + centres[:, 1:] * frames[[0, -1], 2])
+        ends = _rings(points[[0, -1]], np.array(ends)[:, None], frames[[0, -1]])[:, 0]
         start, end = n * k, n * k + 1
         jj = np.arange(k)
         faces.append(np.column_stack([np.full(k, start), (jj + 1) % k, jj]))
@@ -430,10 +426,16 @@ def sweep(path_points, outline, frames, cap: bool = True):
     return vertices, faces
 
 
+def _rings(points, outlines, frames) -> np.ndarray:
+    """``(n, k, 3)`` mm: outline point j placed at sample i, ``P_i + u_ij U_i + v_ij V_i``
+    (``outlines`` ``(k, 2)``, one for all samples, or ``(n, k, 2)``)."""
+    return points[:, None] + outlines[..., :1] * frames[:, None, 1] + outlines[..., 1:] * frames[:, None, 2]
+
+
 def _span_near(points, frames, outlines, box) -> slice:
     """The samples a tube clipped to ``box`` ((2, 3) mm) needs: each dropped run of end rings lies wholly
     beyond one face plane, as does the kept ring next to it, so the clipped solid is the same."""
-    rings = points[:, None] + outlines[..., :1] * frames[:, None, 1] + outlines[..., 1:] * frames[:, None, 2]
+    rings = _rings(points, outlines, frames)
     beyond = np.concatenate([rings.max(axis=1) < box[0], rings.min(axis=1) > box[1]], axis=1)  # (n, 6 faces)
     n = len(points)
     lead, trail = (int(np.where(b.all(axis=0), n, b.argmin(axis=0)).max()) for b in (beyond, beyond[::-1]))
