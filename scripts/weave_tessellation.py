@@ -294,9 +294,7 @@ def binder_table(settings) -> list[dict]:
                 continue
             spline = CubicSpline3(yarn.nodes, yarn.end_tangents)
             params = adaptive_params(spline, yarn.outline, sample.path_sagitta_mm, rate)
-            points, middle = spline(params), (params[1:] + params[:-1]) / 2
-            first, second = spline(middle, 1), spline(middle, 2)
-            kappa = np.linalg.norm(np.cross(first, second), axis=1) / np.linalg.norm(first, axis=1) ** 3
+            points, kappa = spline(params), spline.curvature((params[1:] + params[:-1]) / 2)
             steps = np.linalg.norm(np.diff(points, axis=0), axis=1)
             inside = (points[:-1, 1] >= 0) & (points[1:, 1] <= CELL.size[1])  # y grows along a binder
             path += float(np.sum((steps**3 * kappa**2)[inside]))

@@ -43,6 +43,7 @@ from ..core.choices import EXPORT_PER, WEAVE_RESOLVE, check_choice
 from ..core.errors import WeaveError
 from ..core.validate import show
 from ..scene.scene import Scene
+from .binders import binder_curvature_along, smallest_bend_radius_mm
 from .distort import Distortion, layer_shift, yarn_draws, yarn_rng
 from .export import (
     Part,
@@ -58,12 +59,11 @@ from .manifold_mesh import from_manifold, to_manifold
 from .materials import as_yarn_materials
 from .resolve import interpenetration, resolve_boolean
 from .spec import UnitCell
-from .sweep import CubicSpline3, bend_sagitta_mm, polygon_area
+from .sweep import bend_sagitta_mm, polygon_area
 from .yarn import LABELS, PRIORITIES, Yarn, section_outline
 
 # LABELS, PRIORITIES, Yarn and section_outline live in .yarn; re-exported here, where users meet them
-__all__ = ["LABELS", "PLATEAU", "PRIORITIES", "REMNANT_FRACTION", "Sample", "Yarn", "binder_bend_radius_mm",
-           "binder_curvature", "section_outline"]
+__all__ = ["LABELS", "PLATEAU", "PRIORITIES", "REMNANT_FRACTION", "Sample", "Yarn", "section_outline"]
 
 #: Binder nodes per weft column, as offsets along y in units of the weft's half-width from the
 #: column's centre, all at the column's gap height: the binder runs flat over/under the middle half
@@ -72,9 +72,6 @@ __all__ = ["LABELS", "PLATEAU", "PRIORITIES", "REMNANT_FRACTION", "Sample", "Yar
 #: last interval at each plateau edge keeps the spline from bulging there) brings it to 4e-4 mm
 #: (0.13 % of the binder height) with a smallest bend radius of 0.43 mm (default cell).
 PLATEAU = (-0.5, -0.45, 0.45, 0.5)
-
-#: Points per node interval at which :func:`binder_curvature` evaluates the spline's curvature.
-CURVATURE_SAMPLES = 64
 
 #: A clipped yarn smaller than this fraction of a full one (its outline's area times the box's
 #: length along it) is dropped: with a layer shift, yarns of the neighbouring periods straddle the
@@ -158,7 +155,8 @@ class Sample:
         gives on the regular cell's tightest binder bend (:func:`~xrayraster.weave.tessellation.path_error_mm`,
         the warp's half-height outside it). Each yarn's samples hold it along their whole path, dense in
         bends and sparse where the yarn runs straight; 0 (uniform samples) for a cell whose binders never bend."""
-        return bend_sagitta_mm(binder_bend_radius_mm(self.cell), 1.0 / self.samples_per_mm, self.cell.warp_height / 2)
+        radius = smallest_bend_radius_mm(binder_curvature_along(Sample(self.cell).yarns(), self.cell.size[1]))
+        return bend_sagitta_mm(radius, 1.0 / self.samples_per_mm, self.cell.warp_height / 2)
 
     @property
     def yarn_box(self) -> np.ndarray:
@@ -434,34 +432,3 @@ class Sample:
             raise WeaveError(f"tracers: no yarn named {', '.join(map(repr, missing))} in this sample; name one "
                              f"as Sample.yarns() does, e.g. {names[0]!r} or {names[-1]!r}")
         return chosen.resolve(), tracers
-
-
-def binder_curvature(cell: UnitCell) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Per binder of the cell: arc length (mm) and curvature (1/mm) along its centre line inside the cell.
-
-    The binders of a 1 × 1 :class:`Sample` (their C² splines, node plateaus and clamped ends
-    included), curvature ``|r′ × r″| / |r′|³`` at :data:`CURVATURE_SAMPLES` points per node
-    interval, kept where the path lies inside the cell (``0 ≤ y ≤ size_y``, what the clip keeps);
-    arc length from the first point kept, along the polyline of those points.
-    """
-    if not isinstance(cell, UnitCell):
-        raise WeaveError(f"cell must be a UnitCell, got {show(cell)}")
-    out = []
-    for yarn in Sample(cell).yarns():
-        if yarn.kind != "binder":
-            continue
-        spline = CubicSpline3(yarn.nodes, yarn.end_tangents)
-        t = np.linspace(0.0, spline.length_parameter, CURVATURE_SAMPLES * (len(spline.knots) - 1) + 1)
-        points, first, second = spline(t), spline(t, 1), spline(t, 2)
-        inside = (points[:, 1] >= 0) & (points[:, 1] <= cell.size[1])  # y grows along a binder: one run
-        kappa = np.linalg.norm(np.cross(first, second), axis=1) / np.linalg.norm(first, axis=1) ** 3
-        step = np.linalg.norm(np.diff(points[inside], axis=0), axis=1)
-        out.append((np.concatenate([[0.0], np.cumsum(step)]), kappa[inside]))
-    return out
-
-
-def binder_bend_radius_mm(cell: UnitCell) -> float:
-    """Smallest bend radius (mm) of the cell's binder centre lines inside the cell (:func:`binder_curvature`);
-    ``inf`` when no binder bends."""
-    curvature = max(float(kappa.max()) for _, kappa in binder_curvature(cell))
-    return 1.0 / curvature if curvature > 0 else math.inf

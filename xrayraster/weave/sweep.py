@@ -148,6 +148,11 @@ class CubicSpline3:
             return (m0 * left + m1 * right) / h
         raise WeaveError(f"derivative must be 0, 1 or 2, got {derivative!r}")
 
+    def curvature(self, t) -> np.ndarray:
+        """Curvature ``|r′ × r″| / |r′|³`` (1/mm) at parameters ``t``; ``(len(t),)``."""
+        first, second = self(t, 1), self(t, 2)
+        return np.linalg.norm(np.cross(first, second), axis=1) / np.linalg.norm(first, axis=1) ** 3
+
 
 def sample_path(spline: CubicSpline3, samples_per_mm: float, *, table_per_interval: int = 64):
     """Points and unit tangents on ``spline`` about ``1 / samples_per_mm`` apart along arc length.

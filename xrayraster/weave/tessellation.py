@@ -41,7 +41,8 @@ import numpy as np
 
 from ..core.errors import WeaveError
 from ..core.validate import show
-from .sample import binder_bend_radius_mm, binder_curvature, section_outline
+from .binders import binder_curvature_along, smallest_bend_radius_mm
+from .sample import Sample, section_outline
 from .sections import _corner_radius, _lens_arc
 from .spec import Section, UnitCell
 from .sweep import bend_sagitta_mm
@@ -157,6 +158,21 @@ def path_error_mm(min_bend_radius_mm: float, samples_per_mm: float, half_extent_
         raise WeaveError(f"samples_per_mm ({show(samples_per_mm)}) puts samples {spacing:.4g} mm apart, more than half a "
                          f"turn of the {radius:.4g} mm bend; use samples_per_mm >= {1 / (math.pi * radius):.4g}")
     return bend_sagitta_mm(radius, spacing, reach)
+
+
+def binder_curvature(cell: UnitCell) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per binder of the cell: arc length (mm) and curvature (1/mm) along its centre line inside the
+    cell: the binders of a 1 × 1 :class:`Sample` (:func:`~xrayraster.weave.binders.binder_curvature_along`,
+    :data:`~xrayraster.weave.binders.CURVATURE_SAMPLES` points per node interval)."""
+    if not isinstance(cell, UnitCell):
+        raise WeaveError(f"cell must be a UnitCell, got {show(cell)}")
+    return binder_curvature_along(Sample(cell).yarns(), cell.size[1])
+
+
+def binder_bend_radius_mm(cell: UnitCell) -> float:
+    """Smallest bend radius (mm) of the cell's binder centre lines inside the cell (:func:`binder_curvature`);
+    ``inf`` when no binder bends."""
+    return smallest_bend_radius_mm(binder_curvature(cell))
 
 
 def resolution_for(cell: UnitCell, tolerance_mm: float) -> tuple[int, float]:
