@@ -11,11 +11,13 @@ import pytest
 
 from references.phantoms import (
     _PHANTOM3D_MODIFIED_SHEPP_LOGAN,
+    RTK_SHEPP_LOGAN,
     SHEPP_LOGAN_3D,
     Ellipsoid,
     chord_lengths,
     from_phantom3d_row,
     project,
+    rtk_shepp_logan,
     shepp_logan_3d,
     sphere,
     voxel_values,
@@ -170,6 +172,46 @@ def test_shepp_logan_matches_phantom3d_formula():
     got = voxel_values([from_phantom3d_row(row)], grid)
     assert np.count_nonzero(got) > 100
     assert np.count_nonzero(np.abs(got - _phantom3d_volume([row], n)) > 1e-12) == 0
+
+
+def _rtk_quadric_volume(n: int) -> np.ndarray:
+    """RTK's membership test for its Shepp–Logan, transcribed from rtk::QuadricShape::SetEllipsoid
+    (a quadric A x² + B y² + C z² + E x z − 1 ≤ 0 about the centre, the axes turned about RTK's y),
+    in RTK's frame, sampled on our (z, y, x) grid over [−1, 1]: RTK (x, y, z) = (x, z, −y)."""
+    table = [  # semi-axes, centre (RTK frame), angle about y (deg), density: RTK's SheppLoganPhantom
+        ((0.69, 0.90, 0.92), (0, 0, 0), 0, 2.0), ((0.6624, 0.880, 0.874), (0, 0, 0), 0, -0.98),
+        ((0.41, 0.21, 0.16), (-0.22, -0.25, 0), 108, -0.02), ((0.31, 0.22, 0.11), (0.22, -0.25, 0), 72, -0.02),
+        ((0.21, 0.50, 0.25), (0, -0.25, 0.35), 0, 0.02), ((0.046, 0.046, 0.046), (0, -0.25, 0.10), 0, 0.02),
+        ((0.046, 0.02, 0.023), (-0.08, -0.25, -0.65), 0, 0.01), ((0.046, 0.02, 0.023), (0.06, -0.25, -0.65), 90, 0.01),
+        ((0.056, 0.1, 0.04), (0.06, 0.625, -0.105), 90, 0.02), ((0.056, 0.1, 0.056), (0, 0.625, 0.1), 0, -0.02),
+    ]
+    rng = np.linspace(-1, 1, n)
+    z, y, x = np.meshgrid(rng, rng, rng, indexing="ij")
+    rx, ry, rz = x, z, -y
+    out = np.zeros(x.shape)
+    for (a, b, c), (cx, cy, cz), angle, density in table:
+        co, si = math.cos(math.radians(angle)), math.sin(math.radians(angle))
+        qa = co**2 / a**2 + si**2 / c**2
+        qc = si**2 / a**2 + co**2 / c**2
+        qe = 2 * co * si * (1 / a**2 - 1 / c**2)
+        dx, dy, dz = rx - cx, ry - cy, rz - cz
+        out += density * (qa * dx**2 + dy**2 / b**2 + qc * dz**2 + qe * dx * dz <= 1)
+    return out
+
+
+def test_rtk_shepp_logan_matches_rtks_quadrics():
+    """RTK's table in our frame (references.phantoms.RTK_SHEPP_LOGAN) against RTK's own quadric
+    formula: every point of a 49³ grid, including the two tilted ventricles (the turn's sign)."""
+    n = 49
+    grid = VolumeGeometry((n, n, n), 2 / (n - 1))
+    want = _rtk_quadric_volume(n)
+    got = voxel_values(RTK_SHEPP_LOGAN, grid)
+    assert set(np.unique(want).round(6)) >= {0.0, 2.0, 1.02, 1.0}
+    assert np.count_nonzero(np.abs(got - want) > 1e-9) == 0
+    mirrored = [Ellipsoid(e.centre, e.semi_axes, -e.phi, e.mu) for e in RTK_SHEPP_LOGAN]
+    assert np.count_nonzero(np.abs(voxel_values(mirrored, grid) - want) > 1e-9) > 10  # the sign matters
+    head = rtk_shepp_logan(128.0)
+    assert head[0].semi_axes == pytest.approx((0.69 * 128, 0.92 * 128, 0.90 * 128))
 
 
 def _geometry(theta: float) -> ConeBeamGeometry:
