@@ -21,8 +21,9 @@ backprojection are written out below from their textbook definitions and the con
   - full scan, centred detector: ½ (every line measured twice);
   - full scan, laterally displaced detector (Wang 2002): with Δ the half-width of the band of
     lines seen on both sides of the axis, ``W = sin²(π/4·(1 + t/Δ))`` inside it (t measured
-    positive towards the detector's long side), 1 on the long side beyond it. "Centred" means
-    the line offsets reach equally far on both sides to within one column's spacing of t;
+    positive towards the detector's long side, +t for a centred view), 1 on the long side beyond
+    it. Chosen (``displaced="auto"``) when in some view the two ends' offsets, t_min + t_max,
+    differ by more than 2 % of t_max − t_min; else ½ everywhere. ``True``/``False`` force it;
   - short scan (Parker 1982, in the generalised form with the overscan angle δ = (arc − π)/2
     in place of the half fan angle, Wesarg et al. 2002): with β the source angle from the
     start of the arc,
@@ -266,7 +267,7 @@ def virtual_detector(views, shape, displaced: bool) -> tuple[int, int]:
     return before, after
 
 
-def redundancy_weights(views, shape, scan: str):
+def redundancy_weights(views, shape, scan: str, displaced="auto"):
     """(views, cols) redundancy weights, (views,) angular cells, and whether the scan is full."""
     theta = np.array([view.theta for view in views])
     full = _is_full(np.sort(theta), scan)
@@ -278,12 +279,12 @@ def redundancy_weights(views, shape, scan: str):
         beta = ((theta - start) % (2 * math.pi))[:, None]
         return parker_weight(beta, gamma, 0.5 * (arc - math.pi)), cells, full
     low, high = t.min(axis=1), t.max(axis=1)
-    spacing = np.abs(np.diff(t, axis=1)).max()
-    if np.all(np.abs(high + low) <= spacing):
+    off_centre = np.abs(high + low) / (high - low)
+    if not (np.any(off_centre > 0.02) if displaced == "auto" else displaced):
         return np.full(t.shape, 0.5), cells, full
     weights = np.empty(t.shape)
     for i in range(len(views)):
-        long_side = 1.0 if high[i] + low[i] > 0 else -1.0
+        long_side = -1.0 if high[i] + low[i] < -1e-9 * (high[i] - low[i]) else 1.0
         weights[i] = wang_weight(t[i], min(-low[i], high[i]), long_side)
     return weights, cells, full
 
@@ -316,7 +317,7 @@ def _voxel_centres(volume) -> np.ndarray:
     return np.stack([x, y, z], axis=-1)
 
 
-def filtered_projections(projections, geometry, window="ram-lak", cutoff=1.0, scan="auto"):
+def filtered_projections(projections, geometry, window="ram-lak", cutoff=1.0, scan="auto", displaced="auto"):
     """(views, rows, before + cols + after) cosine- and redundancy-weighted, ramp-filtered
     projections (float64) on the virtual detector of :func:`virtual_detector`, the per-view
     objects, their angular cells and ``before``."""
@@ -325,7 +326,7 @@ def filtered_projections(projections, geometry, window="ram-lak", cutoff=1.0, sc
     views = [_View(row, cone) for row in vec.array]
     shape = vec.detector_shape
     pitch = float(np.linalg.norm(views[0].u))
-    redundancy, cells, full = redundancy_weights(views, shape, scan)
+    redundancy, cells, full = redundancy_weights(views, shape, scan, displaced)
     before, after = virtual_detector(views, shape, full and not np.all(redundancy == 0.5))
     p = np.asarray(projections, dtype=np.float64)
     out = np.empty((p.shape[0], p.shape[1], before + p.shape[2] + after))
@@ -335,9 +336,10 @@ def filtered_projections(projections, geometry, window="ram-lak", cutoff=1.0, sc
     return out, views, cells, before
 
 
-def fdk_reference(projections, geometry, volume, window="ram-lak", cutoff=1.0, scan="auto") -> np.ndarray:
+def fdk_reference(projections, geometry, volume, window="ram-lak", cutoff=1.0, scan="auto",
+                  displaced="auto") -> np.ndarray:
     """The reconstruction, float64 (z, y, x), mm⁻¹ for line integrals in ``projections``."""
-    filtered, views, cells, before = filtered_projections(projections, geometry, window, cutoff, scan)
+    filtered, views, cells, before = filtered_projections(projections, geometry, window, cutoff, scan, displaced)
     shape = np.shape(projections)[1:]
     x = _voxel_centres(volume)
     out = np.zeros(volume.shape)

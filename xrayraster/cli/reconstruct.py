@@ -50,6 +50,9 @@ def add_parser(subparsers) -> None:
     rec.add_argument("--cutoff", type=float, default=1.0, help="filter cut-off, fraction of Nyquist (default 1)")
     rec.add_argument("--scan", choices=SCAN_KINDS, default="auto",
                      help="full circle (redundancy ½ or displaced-detector weights) or short scan (Parker); default auto")
+    rec.add_argument("--displaced", choices=("auto", "on", "off"), default="auto",
+                     help="full scans: Wang's displaced-detector weights on, off, or chosen from the detector's "
+                          "coverage of the axis (default auto; the choice is logged with -v)")
     rec.add_argument("--input", choices=RECONSTRUCTION_INPUTS, default=None,
                      help="what the TIFF holds (default: its metadata, written by 'xrayraster render', else lineint)")
     rec.add_argument("--device", default=None, help="OpenCL device: 'P:D' or part of its name (default: the fastest)")
@@ -136,6 +139,7 @@ def run(args) -> int:
               f"angular-sampling rule asks for about π/2·{n} ≈ {needed:.0f}; expect streaks", file=sys.stderr)
     start = time.perf_counter()
     vol = fdk(stack, geometry, volume, filter=args.filter, cutoff=args.cutoff, scan=args.scan, input=kind,
+              displaced={"auto": "auto", "on": True, "off": False}[args.displaced],
               device=args.device)
     seconds = time.perf_counter() - start
     vz, vy, vx = volume.voxel_size

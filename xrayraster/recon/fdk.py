@@ -22,7 +22,8 @@ __all__ = ["FDKStream", "ReconstructionError", "Volume", "fdk"]
 
 
 def fdk(projections, geometry=None, volume: VolumeGeometry | None = None, *, filter: str = "ram-lak",
-        cutoff: float = 1.0, scan: str = "auto", input: str | None = None, context: CLContext | None = None,
+        cutoff: float = 1.0, scan: str = "auto", displaced="auto", input: str | None = None,
+        context: CLContext | None = None,
         device: str | None = None, memory_limit: int | None = None) -> Volume:
     """Reconstruct ``volume`` from ``projections`` (views, rows, cols) taken with ``geometry``.
 
@@ -34,6 +35,8 @@ def fdk(projections, geometry=None, volume: VolumeGeometry | None = None, *, fil
     * ``filter``: ``ram-lak``, ``shepp-logan``, ``cosine``, ``hamming`` or ``hann``; ``cutoff``
       as a fraction of the Nyquist frequency (:mod:`xrayraster.recon.ramp_filter`).
     * ``scan``: ``auto``, ``full`` or ``short`` (Parker weights), see :mod:`xrayraster.recon.fdk_weights`.
+    * ``displaced``: full scans only: ``auto`` (chosen from the detector's coverage of the axis and
+      logged), ``True`` (Wang's displaced-detector weights) or ``False`` (every line weighted ½).
     * ``context``: a :class:`~xrayraster.recon.opencl.CLContext` to reuse (kernels stay compiled),
       else one is made on ``device`` (or ``XRAYRASTER_CL_DEVICE``, or the fastest device).
     * ``memory_limit``: bytes of device memory to plan with (default 80 % of the device's).
@@ -43,7 +46,7 @@ def fdk(projections, geometry=None, volume: VolumeGeometry | None = None, *, fil
     """
     projections, geometry, input = _unpack(projections, geometry, input)
     check_shape(projections, geometry)
-    with FDKStream(geometry, volume, filter=filter, cutoff=cutoff, scan=scan, context=context, device=device,
+    with FDKStream(geometry, volume, filter=filter, cutoff=cutoff, scan=scan, displaced=displaced, context=context, device=device,
                    memory_limit=memory_limit) as stream:
         stream.add(0, projections, input)
         out = stream.result()

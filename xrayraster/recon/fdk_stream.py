@@ -105,17 +105,18 @@ class FDKStream:
     """
 
     def __init__(self, geometry, volume: VolumeGeometry, *, filter: str = "ram-lak", cutoff: float = 1.0,
-                 scan: str = "auto", context: CLContext | None = None, device: str | None = None,
+                 scan: str = "auto", displaced="auto", context: CLContext | None = None, device: str | None = None,
                  memory_limit: int | None = None, batch_views: int = MAX_BATCH_VIEWS):
         if not isinstance(volume, VolumeGeometry):
             raise ReconstructionError(
                 f"volume must be a VolumeGeometry (the grid to reconstruct), got {type(volume).__name__}")
         self.geometry, self.volume = geometry, volume
         self.vector_geometry = vec = as_vector_geometry(geometry)
-        self.views = fdk_views(vec, volume, scan)
+        self.views = fdk_views(vec, volume, scan, displaced)
         response = ramp_response(self.views.filtered_cols, self.views.pixel_pitch, filter, cutoff)
         self._provenance = {"method": "FDK" if vec.beam == "cone" else "FBP", "geometry": geometry.to_dict(),
-                            "filter": filter, "cutoff": cutoff, "scan": scan}
+                            "filter": filter, "cutoff": cutoff, "scan": self.views.scan,
+                            "displaced": self.views.displaced}
         self.ctx = context or CLContext(device)
         self._owns_context = context is None
         info = self.ctx.info
