@@ -317,10 +317,38 @@ def _voxel_centres(volume) -> np.ndarray:
     return np.stack([x, y, z], axis=-1)
 
 
-def filtered_projections(projections, geometry, window="ram-lak", cutoff=1.0, scan="auto", displaced="auto"):
+def truncated_ends(p: np.ndarray, redundancy: np.ndarray, truncation) -> np.ndarray:
+    """(views, rows, 2) booleans: extrapolate this row before its first / after its last column?
+
+    ``"auto"``: the mean line integral of the 4 outermost pixels, times the edge's redundancy
+    weight over the view's largest, exceeds both 0.02 and 2 % of the row's largest line integral."""
+    if truncation != "auto":
+        return np.full(p.shape[:2] + (2,), bool(truncation))
+    relative = redundancy[:, [0, -1]] / redundancy.max(axis=1, keepdims=True)  # (views, 2)
+    edges = np.stack([p[:, :, :4].mean(axis=2), p[:, :, -4:].mean(axis=2)], axis=2) * relative[:, None, :]
+    limit = np.maximum(0.02, 0.02 * p.max(axis=2))[:, :, None]
+    return edges > limit
+
+
+def extrapolated(row: np.ndarray, pad: int, left: bool, right: bool) -> np.ndarray:
+    """``row`` (weighted) with ``pad`` columns added on each side: past a truncated edge the point
+    mirror about the edge pixel, ``2·q(edge) − q(mirror)`` clamped at 0, times the roll-off
+    ``cos²(π/2·j/(pad + 1))`` at j columns past the edge (Ohnesorge et al. 2000); else zeros."""
+    cols = len(row)
+    j = np.arange(1, pad + 1)
+    roll = np.cos(0.5 * math.pi * j / (pad + 1)) ** 2
+    before = roll * np.maximum(0.0, 2 * row[0] - row[np.minimum(j, cols - 1)]) if left else np.zeros(pad)
+    after = roll * np.maximum(0.0, 2 * row[-1] - row[np.maximum(cols - 1 - j, 0)]) if right else np.zeros(pad)
+    return np.concatenate([before[::-1], row, after])
+
+
+def filtered_projections(projections, geometry, window="ram-lak", cutoff=1.0, scan="auto", displaced="auto",
+                         truncation="auto", truncation_width=0.5):
     """(views, rows, before + cols + after) cosine- and redundancy-weighted, ramp-filtered
     projections (float64) on the virtual detector of :func:`virtual_detector`, the per-view
-    objects, their angular cells and ``before``."""
+    objects, their angular cells and ``before``. With truncated rows (:func:`truncated_ends`), each
+    row is extended by ``round(truncation_width·cols)`` columns on both sides (:func:`extrapolated`)
+    before filtering, and cut back after."""
     vec = geometry.to_vec()  # ConeBeam-, ParallelBeam- or VectorGeometry: (views, 12) float64 in .array
     cone = vec.beam == "cone"
     views = [_View(row, cone) for row in vec.array]
@@ -329,17 +357,23 @@ def filtered_projections(projections, geometry, window="ram-lak", cutoff=1.0, sc
     redundancy, cells, full = redundancy_weights(views, shape, scan, displaced)
     before, after = virtual_detector(views, shape, full and not np.all(redundancy == 0.5))
     p = np.asarray(projections, dtype=np.float64)
+    ends = truncated_ends(p, redundancy, truncation)
+    pad = max(1, round(truncation_width * shape[1])) if ends.any() else 0
     out = np.empty((p.shape[0], p.shape[1], before + p.shape[2] + after))
     for i, view in enumerate(views):
-        weighted = np.pad(p[i] * view.cosine(shape) * redundancy[i][None, :], ((0, 0), (before, after)))
-        out[i] = ramp_filter_rows(weighted, pitch, window, cutoff)
+        weighted = p[i] * view.cosine(shape) * redundancy[i][None, :]
+        rows = np.array([extrapolated(row, pad, *ends[i, k]) for k, row in enumerate(weighted)])
+        rows = np.pad(rows, ((0, 0), (max(0, before - pad), max(0, after - pad))))
+        first = max(0, pad - before)  # the column of the virtual detector's first column
+        out[i] = ramp_filter_rows(rows, pitch, window, cutoff)[:, first : first + out.shape[2]]
     return out, views, cells, before
 
 
-def fdk_reference(projections, geometry, volume, window="ram-lak", cutoff=1.0, scan="auto",
-                  displaced="auto") -> np.ndarray:
+def fdk_reference(projections, geometry, volume, window="ram-lak", cutoff=1.0, scan="auto", displaced="auto",
+                  truncation="auto", truncation_width=0.5) -> np.ndarray:
     """The reconstruction, float64 (z, y, x), mm⁻¹ for line integrals in ``projections``."""
-    filtered, views, cells, before = filtered_projections(projections, geometry, window, cutoff, scan, displaced)
+    filtered, views, cells, before = filtered_projections(projections, geometry, window, cutoff, scan, displaced,
+                                                          truncation, truncation_width)
     shape = np.shape(projections)[1:]
     x = _voxel_centres(volume)
     out = np.zeros(volume.shape)

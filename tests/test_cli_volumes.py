@@ -68,6 +68,20 @@ def test_reconstruct_writes_the_fdk_volume_with_its_voxel_size(cl, tmp_path, sta
     assert (out.with_suffix(".png")).is_file()
 
 
+def test_reconstruct_switches_force_the_weights_and_the_truncation_correction(cl, tmp_path, stack):
+    """--displaced on / --truncation on with a width: the same volume as xr.fdk with those options,
+    and the choices in the TIFF's metadata."""
+    path, p = stack
+    out = tmp_path / "vol.tif"
+    assert cli.main(["reconstruct", str(path), "--scan-file", str(_scan(tmp_path, volume=VOLUME_JSON)), "-o", str(out),
+                     "--displaced", "on", "--truncation", "on", "--truncation-width", "0.3"]) == 0
+    info = read_tiff_info(out)
+    assert info["displaced"] is True and info["truncation"] is True and info["truncation_width"] == 0.3
+    assert info["truncation_corrected_row_ends"] == 1.0
+    want = xr.fdk(p, GEOMETRY, VOLUME, displaced=True, truncation=True, truncation_width=0.3, context=cl).data
+    np.testing.assert_allclose(tifffile.imread(out), want, atol=1e-5 * np.abs(want).max())
+
+
 def test_reconstruct_bad_input_exits_2_and_names_the_fix(tmp_path, stack, capsys):
     path, p = stack
     out = tmp_path / "vol.tif"

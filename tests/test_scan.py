@@ -115,6 +115,9 @@ def test_three_classes_and_the_files(scanned):
     assert set(metadata["seconds"]) == {"sample", "projections", "fdk", "labels", "total"}
     assert metadata["peak_rss_mib"] > 0 and metadata["libraries"]["numpy"] == np.__version__
     assert metadata["volume"]["shape"] == [44, 64, 64] and metadata["geometry"]["num_views"] == 90
+    fdk = metadata["reconstruction"]  # a centred full scan; the framed box's corners barely reach the edges
+    assert fdk["scan"] == "full" and fdk["displaced"] is False and fdk["truncation"] == "auto"
+    assert 0 <= fdk["truncation_corrected_row_ends"] < 0.05
 
 
 def test_class_means_follow_the_physics(scanned):
@@ -205,6 +208,8 @@ def test_an_interrupted_scan_leaves_nothing(tmp_path, monkeypatch):
     (lambda t: t.replace('weft = "weft_carbon"', 'weft = "unobtainium"'), r"\[weave.materials\].*weft.*unobtainium"),
     (lambda t: t.replace("voxel_size = 0.23 ", "voxel_size = -1 "), r"\[volume\].*voxel_size"),
     (lambda t: t.replace('filter = "ram-lak"', 'filter = "lanczos"'), r"\[scan\].*filter"),
+    (lambda t: t.replace("[scan]\n", '[scan]\ntruncation = "yes"\n'), r"\[scan\].*truncation"),
+    (lambda t: t.replace("[scan]\n", "[scan]\ntruncation_width = 9\n"), r"\[scan\].*truncation_width"),
 ])
 def test_bad_scan_files_name_the_key_before_any_work(tmp_path, capsys, monkeypatch, edit, message):
     def no_work(*args, **kwargs):

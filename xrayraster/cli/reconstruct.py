@@ -16,10 +16,12 @@ from ..core.geometry import geometry_from_dict
 from ..io.scan_file import read_scan_file
 from ..io.tiff import read_tiff
 from ..recon.fdk import fdk
+from ..recon.truncation import DEFAULT_WIDTH
 from .options import add_scan_file
 from .outputs import check_outputs, quicklook_path
 
 GEOMETRY_SOURCES = ("scan-file", "projections")
+SWITCH = {"auto": "auto", "on": True, "off": False}  # --displaced, --truncation
 
 # Angular sampling. The usual rule asks for about (π/2)·N views over the scan for a grid N voxels
 # across (its larger transverse side): then the arc between neighbouring views at the grid's edge
@@ -53,6 +55,12 @@ def add_parser(subparsers) -> None:
     rec.add_argument("--displaced", choices=("auto", "on", "off"), default="auto",
                      help="full scans: Wang's displaced-detector weights on, off, or chosen from the detector's "
                           "coverage of the axis (default auto; the choice is logged with -v)")
+    rec.add_argument("--truncation", choices=("auto", "on", "off"), default="auto",
+                     help="extrapolate rows cut off by the detector's edges (an object wider than the field of "
+                          "view): the rows with signal at an edge (default auto), every row, or none")
+    rec.add_argument("--truncation-width", type=float, default=DEFAULT_WIDTH, metavar="SHARE",
+                     help=f"how far the rows are extrapolated on each side, a share of the detector width "
+                          f"(default {DEFAULT_WIDTH})")
     rec.add_argument("--input", choices=RECONSTRUCTION_INPUTS, default=None,
                      help="what the TIFF holds (default: its metadata, written by 'xrayraster render', else lineint)")
     rec.add_argument("--device", default=None, help="OpenCL device: 'P:D' or part of its name (default: the fastest)")
@@ -139,8 +147,8 @@ def run(args) -> int:
               f"angular-sampling rule asks for about π/2·{n} ≈ {needed:.0f}; expect streaks", file=sys.stderr)
     start = time.perf_counter()
     vol = fdk(stack, geometry, volume, filter=args.filter, cutoff=args.cutoff, scan=args.scan, input=kind,
-              displaced={"auto": "auto", "on": True, "off": False}[args.displaced],
-              device=args.device)
+              displaced=SWITCH[args.displaced], truncation=SWITCH[args.truncation],
+              truncation_width=args.truncation_width, device=args.device)
     seconds = time.perf_counter() - start
     vz, vy, vx = volume.voxel_size
     vol = dataclasses.replace(vol, provenance={**vol.provenance, "geometry_source": source,

@@ -44,6 +44,9 @@ _GAP_PX = 4  # black space between the pictures of slices.png
 # and (measured) as fast in the backprojection as the FDK's largest batches. docs/scan.md
 BATCH_VIEWS = 32
 STAGES = ("sample", "projections", "fdk", "labels")
+# What the FDK chose, from its provenance: weights, and whether truncated rows were extrapolated.
+RECONSTRUCTION_FACTS = ("method", "filter", "scan", "displaced", "truncation", "truncation_width",
+                        "truncation_corrected_row_ends")
 # Per-view lists of Renderer.project_all's provenance, joined across batches.
 _PER_VIEW = ("views", "bins_used", "dropped_signal_share", "starved_pixels")
 
@@ -100,8 +103,8 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False) -
     overlap = "resolve" if loaded.weave is not None else "auto"
     with Renderer(loaded.geometry, overlap=overlap) as renderer, CLContext() as cl:
         with _timed(seconds, "fdk"):
-            stream = FDKStream(loaded.geometry, loaded.volume, filter=options.filter, context=cl,
-                               batch_views=BATCH_VIEWS)
+            stream = FDKStream(loaded.geometry, loaded.volume, filter=options.filter, truncation=options.truncation,
+                               truncation_width=options.truncation_width, context=cl, batch_views=BATCH_VIEWS)
         with stream:
             provenances, stacks = _project_into(stream, renderer, scene, loaded, seconds, progress, keep_projections)
             with _timed(seconds, "fdk"):
@@ -130,6 +133,7 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False) -
                         "dropped_signal_share": max(provenance["dropped_signal_share"]),
                         "starved_pixels": sum(provenance["starved_pixels"]),
                         "spectral_table": provenance.get("spectral_table")},
+        "reconstruction": {key: volume.provenance[key] for key in RECONSTRUCTION_FACTS},
         "realism": loaded.realism.to_dict(),
         "mount": [{"name": o.name, "material": repr(o.material)}
                   for o in (loaded.mount.objects if loaded.mount is not None else ())],

@@ -34,6 +34,7 @@ from ..io.weave_file import WeaveFile, framing_geometry, sample_grid, weave_from
 from ..physics.detector import Detector
 from ..physics.realism import Realism
 from ..physics.spectrum import Spectrum
+from ..recon.truncation import DEFAULT_WIDTH
 from ..scene.materials import Material
 from ..scene.scene import Scene
 from ..weave.tessellation import resolution_for
@@ -48,12 +49,17 @@ class ScanOptions:
     """The ``[scan]`` table: ``seed`` (noise seed, an integer >= 0), ``noise`` (photon noise on),
     ``filter`` (the FDK ramp-filter window, one of :data:`~xrayraster.core.choices.FILTERS`),
     ``mesh_tolerance_voxels`` (a weave's largest predicted path-length error per yarn boundary, in
-    voxels of the grid, where ``[weave.sample]`` leaves the mesh resolution open; 0.05 = 1/20)."""
+    voxels of the grid, where ``[weave.sample]`` leaves the mesh resolution open; 0.05 = 1/20),
+    ``truncation`` (``"auto"``, true or false: extrapolate rows cut off by the detector's edges, a
+    sample wider than the field of view) and ``truncation_width`` (the extrapolation's width on
+    each side, a share of the detector width), as :func:`xrayraster.fdk` takes them."""
 
     seed: int = 0
     noise: bool = True
     filter: str = "ram-lak"
     mesh_tolerance_voxels: float = 0.05
+    truncation: str | bool = "auto"
+    truncation_width: float = DEFAULT_WIDTH
 
     @classmethod
     def from_dict(cls, d: dict, where: str) -> "ScanOptions":
@@ -68,6 +74,15 @@ class ScanOptions:
             if not isinstance(d["noise"], bool):
                 raise ConfigError(f"{where}: noise must be true or false, got {d['noise']!r}")
             options["noise"] = d["noise"]
+        if "truncation" in d:
+            if d["truncation"] not in ("auto", True, False) or not isinstance(d["truncation"], (str, bool)):
+                raise ConfigError(f"{where}: truncation must be \"auto\", true or false, got {d['truncation']!r}")
+            options["truncation"] = d["truncation"]
+        if "truncation_width" in d:
+            options["truncation_width"] = fields.number(d["truncation_width"], "truncation_width", where, positive=True)
+            if options["truncation_width"] > 4:
+                raise ConfigError(f"{where}: truncation_width must be at most 4 (a share of the detector width), "
+                                  f"got {d['truncation_width']!r}")
         if "filter" in d:
             options["filter"] = fields.string(d["filter"], "filter", where)
             if options["filter"] not in FILTERS:

@@ -16,14 +16,15 @@ from ..core.projections import Projections
 from ..core.volume import VolumeGeometry
 from .fdk_stream import FDKStream, check_shape
 from .opencl import CLContext
+from .truncation import DEFAULT_WIDTH
 from .volume import Volume
 
 __all__ = ["FDKStream", "ReconstructionError", "Volume", "fdk"]
 
 
 def fdk(projections, geometry=None, volume: VolumeGeometry | None = None, *, filter: str = "ram-lak",
-        cutoff: float = 1.0, scan: str = "auto", displaced="auto", input: str | None = None,
-        context: CLContext | None = None,
+        cutoff: float = 1.0, scan: str = "auto", displaced="auto", truncation="auto",
+        truncation_width: float = DEFAULT_WIDTH, input: str | None = None, context: CLContext | None = None,
         device: str | None = None, memory_limit: int | None = None) -> Volume:
     """Reconstruct ``volume`` from ``projections`` (views, rows, cols) taken with ``geometry``.
 
@@ -37,6 +38,11 @@ def fdk(projections, geometry=None, volume: VolumeGeometry | None = None, *, fil
     * ``scan``: ``auto``, ``full`` or ``short`` (Parker weights), see :mod:`xrayraster.recon.fdk_weights`.
     * ``displaced``: full scans only: ``auto`` (chosen from the detector's coverage of the axis and
       logged), ``True`` (Wang's displaced-detector weights) or ``False`` (every line weighted ½).
+    * ``truncation``: rows cut off where the object still attenuates (an object wider than the
+      field of view) are extrapolated past the detector's edges before filtering: ``auto`` (the
+      row ends with signal at the edge), ``True`` (every row end) or ``False``; over
+      ``truncation_width`` × the detector width on each side (:mod:`xrayraster.recon.truncation`).
+      The share of row ends corrected is in the result's provenance.
     * ``context``: a :class:`~xrayraster.recon.opencl.CLContext` to reuse (kernels stay compiled),
       else one is made on ``device`` (or ``XRAYRASTER_CL_DEVICE``, or the fastest device).
     * ``memory_limit``: bytes of device memory to plan with (default 80 % of the device's).
@@ -46,7 +52,8 @@ def fdk(projections, geometry=None, volume: VolumeGeometry | None = None, *, fil
     """
     projections, geometry, input = _unpack(projections, geometry, input)
     check_shape(projections, geometry)
-    with FDKStream(geometry, volume, filter=filter, cutoff=cutoff, scan=scan, displaced=displaced, context=context, device=device,
+    with FDKStream(geometry, volume, filter=filter, cutoff=cutoff, scan=scan, displaced=displaced, truncation=truncation,
+                   truncation_width=truncation_width, context=context, device=device,
                    memory_limit=memory_limit) as stream:
         stream.add(0, projections, input)
         out = stream.result()

@@ -29,7 +29,8 @@ from ..core.memory import available_memory
 from ..core.volume import VolumeGeometry
 from .fdk_weights import FDKViews, fdk_views
 from .opencl import CLContext
-from .ramp_filter import ramp_response
+from .ramp_filter import padded_length, ramp_response
+from .truncation import DEFAULT_WIDTH, LEFT, RIGHT, check_truncation, padding_columns, truncated_row_ends
 from .volume import MM_TO_CM, Volume
 
 log = logging.getLogger(__name__)
@@ -105,31 +106,39 @@ class FDKStream:
     """
 
     def __init__(self, geometry, volume: VolumeGeometry, *, filter: str = "ram-lak", cutoff: float = 1.0,
-                 scan: str = "auto", displaced="auto", context: CLContext | None = None, device: str | None = None,
-                 memory_limit: int | None = None, batch_views: int = MAX_BATCH_VIEWS):
+                 scan: str = "auto", displaced="auto", truncation="auto", truncation_width: float = DEFAULT_WIDTH,
+                 context: CLContext | None = None, device: str | None = None, memory_limit: int | None = None,
+                 batch_views: int = MAX_BATCH_VIEWS):
         if not isinstance(volume, VolumeGeometry):
             raise ReconstructionError(
                 f"volume must be a VolumeGeometry (the grid to reconstruct), got {type(volume).__name__}")
         self.geometry, self.volume = geometry, volume
         self.vector_geometry = vec = as_vector_geometry(geometry)
         self.views = fdk_views(vec, volume, scan, displaced)
-        response = ramp_response(self.views.filtered_cols, self.views.pixel_pitch, filter, cutoff)
+        check_truncation(truncation, truncation_width)
+        self._window = (filter, cutoff)
+        self._truncation = truncation
+        self._pad = 0 if truncation is False else padding_columns(self.views.detector_shape[1], truncation_width)
         self._provenance = {"method": "FDK" if vec.beam == "cone" else "FBP", "geometry": geometry.to_dict(),
                             "filter": filter, "cutoff": cutoff, "scan": self.views.scan,
-                            "displaced": self.views.displaced}
+                            "displaced": self.views.displaced, "truncation": truncation,
+                            "truncation_width": truncation_width if self._pad else 0.0}
+        red = self.views.redundancy
+        self._edge_weights = red[:, [0, -1]] / np.maximum(red.max(axis=1, keepdims=True), 1e-12)
+        self._row_ends = [0, 0]  # extrapolated, seen
         self.ctx = context or CLContext(device)
         self._owns_context = context is None
         info = self.ctx.info
         device_bytes = int(info.global_mem * DEVICE_SHARE) if memory_limit is None else int(memory_limit)
-        self.plan = plan_memory(self.views, volume, len(response), device_bytes, info.max_alloc, info.local_mem,
-                                available_memory(), batch_views)
+        self.plan = plan_memory(self.views, volume, padded_length(self.views.filtered_cols + 2 * self._pad),
+                                device_bytes, info.max_alloc, info.local_mem, available_memory(), batch_views)
         rows, cols = self.views.detector_shape
         log.info("FDK on %s: %d views of %d×%d, volume %s, %d-view batches, %d-plane slabs, %s", info.name,
                  len(self.views.scale), rows, cols, volume.shape, self.plan.batch, self.plan.slab,
                  "backprojected as they arrive" if self.plan.streamed
                  else f"filtered views kept {'on the device' if self.plan.resident else 'in host memory'}")
         self._layout = {"COLUMN_MAJOR": 1} if _column_major(info, LAYOUT) else {}
-        self._filter_setup(response)
+        self._filter_setup()
         self._backproject_setup()
         self._added = np.zeros(len(self.views.scale), bool)
         self._kept = []  # (views, filtered batch on the device or in host memory) until result(), unless streamed
@@ -203,7 +212,9 @@ class FDKStream:
         data, self._out = self._out, None
         self.release()
         data *= MM_TO_CM
-        return Volume(data, self.volume, provenance=dict(self._provenance))
+        corrected, seen = self._row_ends
+        provenance = {**self._provenance, "truncation_corrected_row_ends": corrected / max(seen, 1)}
+        return Volume(data, self.volume, provenance=provenance)
 
     def release(self) -> None:
         """Free the device buffers (and the context, if this stream made it)."""
@@ -226,21 +237,29 @@ class FDKStream:
 
     # -- stage 1: pre-weight and ramp-filter every row of a batch --------------------------------
 
-    def _filter_setup(self, response) -> None:
-        import pyopencl as cl
-
-        n = len(response)
-        rows, cols = self.views.detector_shape
+    def _filter_setup(self) -> None:
+        rows = self.views.detector_shape[0]
         defines = {**self._layout, **({"BUF": "__global", "GLOBAL_SCRATCH": 1} if self.plan.global_scratch else {})}
         self._filter_kernel = self.ctx.kernel("fdk_filter.cl", "filter_rows", defines)
+        self._geo = _view_geometry(self.views)
+        self._view_bytes = (rows + 2) * (self.views.filtered_cols + 2) * 4
+        self._set_fft(extended=self._truncation is True)
+
+    def _set_fft(self, extended: bool) -> None:
+        """The ramp response and twiddles for rows padded to fit the filtered columns, and the
+        extrapolated ones too when ``extended`` (a longer FFT, made only once a row needs it)."""
+        import pyopencl as cl
+
+        self._extended = extended
+        response = ramp_response(self.views.filtered_cols + (2 * self._pad if extended else 0), self.views.pixel_pitch,
+                                 *self._window)
+        n = len(response)
         bits = int(math.log2(n))
         reverse = np.array([int(f"{k:0{bits}b}"[::-1], 2) for k in range(n)])
         self._response = self.ctx.buffer((response[reverse] / n).astype(np.float32), "r")
         self._twiddle = self.ctx.buffer(np.exp(-2j * np.pi * np.arange(n // 2) / n).astype(np.complex64), "r")
         self._n_fft = n
-        self._geo = _view_geometry(self.views)
         self._local_size = int(min(self.ctx.info.max_work_group, n // 2, 256))
-        self._view_bytes = (rows + 2) * (self.views.filtered_cols + 2) * 4
         self._local_scratch = cl.LocalMemory(n * 8)
 
     def _filter(self, batch: range, raw: np.ndarray):
@@ -250,7 +269,14 @@ class FDKStream:
         ctx, n, count = self.ctx, self._n_fft, len(batch)
         rows, cols = self.views.detector_shape
         pairs = (rows + 1) // 2
+        ends = truncated_row_ends(raw, self._edge_weights[batch.start : batch.stop], self._truncation)
+        if ends.any() and not self._extended:
+            self._set_fft(extended=True)  # the batches before had no truncated row: the same either way
+            n = self._n_fft
+        self._row_ends[0] += int(np.count_nonzero(ends & LEFT)) + int(np.count_nonzero(ends & RIGHT))
+        self._row_ends[1] += 2 * ends.size
         raw_dev = ctx.buffer(raw, "r")
+        ends_dev = ctx.buffer(ends, "r")
         # The pad lets backproject_windowed read its row window past the last column.
         out_dev = ctx.buffer(count * self._view_bytes + WINDOW_PAD)
         cl.enqueue_fill_buffer(ctx.queue, out_dev, np.float32(0), 0, count * self._view_bytes + WINDOW_PAD)
@@ -258,10 +284,11 @@ class FDKStream:
         geo_dev = ctx.buffer(self._geo[batch.start : batch.stop], "r")
         scratch = ctx.buffer(count * pairs * n * 8) if self.plan.global_scratch else self._local_scratch
         self._filter_kernel(ctx.queue, (count * pairs * self._local_size,), (self._local_size,), raw_dev, out_dev,
-                            red_dev, geo_dev, self._response, self._twiddle, scratch, np.int32(rows), np.int32(cols),
-                            np.int32(self.views.lead), np.int32(self.views.filtered_cols), np.int32(n),
+                            red_dev, geo_dev, ends_dev, self._response, self._twiddle, scratch, np.int32(rows),
+                            np.int32(cols), np.int32(self.views.lead), np.int32(self.views.filtered_cols),
+                            np.int32(self._pad if self._extended else 0), np.int32(n),
                             np.int32(self.views.beam == "cone"))
-        for buffer in (raw_dev, red_dev, geo_dev) + ((scratch,) if self.plan.global_scratch else ()):
+        for buffer in (raw_dev, red_dev, geo_dev, ends_dev) + ((scratch,) if self.plan.global_scratch else ()):
             buffer.release()  # after the kernel: OpenCL keeps them alive until it has run
         return out_dev
 
