@@ -27,7 +27,11 @@ Usage::
     python -m scripts.bench_fdk --sizes 128 256  # a subset
     python -m scripts.bench_fdk --quick          # 64³ smoke test
 
-Writes out/bench_fdk.json and docs/bench_fdk.png (``--quick``: out/bench_fdk_quick.json and .png).
+After the sizes, the displaced-detector and region-of-interest cases of scripts/bench_fdk_cases.py
+(RTK beside us; ``--no-cases`` skips them, ``--quick`` too).
+
+Writes out/bench_fdk.json and docs/bench_fdk.png (``--quick``: out/bench_fdk_quick.json and .png),
+and docs/bench_fdk_cases.png.
 """
 
 from __future__ import annotations
@@ -40,7 +44,7 @@ import numpy as np
 
 import xrayraster as xr
 from references.phantoms import project, shepp_logan_3d, sphere, voxel_values
-from scripts import common
+from scripts import bench_fdk_cases, common
 from scripts.common import best_of, say
 from scripts.peers import rtk_peer
 
@@ -153,6 +157,8 @@ def main(argv=None) -> int:
     ap = common.parser(__doc__, "64³ only, a smoke test")
     ap.add_argument("--sizes", type=int, nargs="+", choices=sorted(CASES), default=[128, 256, 512])
     ap.add_argument("--no-rtk", action="store_true", help="do not run RTK")
+    ap.add_argument("--no-cases", action="store_true",
+                    help="skip the displaced-detector and region-of-interest cases (scripts/bench_fdk_cases.py)")
     ap.add_argument("--plot", type=Path, default=None, help="PNG (default docs/bench_fdk.png; --quick: out/bench_fdk_quick.png)")
     args = common.outputs(ap.parse_args(argv), "bench_fdk")
     sizes = [64] if args.quick else args.sizes
@@ -167,6 +173,7 @@ def main(argv=None) -> int:
     for n in sizes:
         records.append(run_case(n, ctx, reason is None, common.OUT / "bench_fdk_cache"))
         common.write_json(args.json, {"machine": machine, "records": records})
+    cases = [] if args.quick or args.no_cases else bench_fdk_cases.run(ctx, reason is None)
     say("\n  size  views │ ours s   G upd/s  RMSE     │ RTK s    G upd/s  RMSE     │ RTK/ours")
     for r in records:
         rtk = (f"{r['rtk_s']:>8.3f} {r['updates'] / r['rtk_s'] / 1e9:>8.2f} {r['rtk_rmse_rel']:>8.5f} │ {r['ratio']:>7.2f}×"
@@ -174,8 +181,11 @@ def main(argv=None) -> int:
         say(f"  {r['size']:>4}³ {r['views']:>5} │ {r['ours_s']:>7.3f} {r['updates'] / r['ours_s'] / 1e9:>8.2f} "
             f"{r['ours_rmse_rel']:>8.5f} │ {rtk}")
     png = plot(records, args.plot)
+    if cases:
+        bench_fdk_cases.plot(cases, bench_fdk_cases.PLOT)
     line = common.finish(machine)
-    common.write_json(args.json, {"machine": machine, "records": records, "total_s": time.perf_counter() - start})
+    common.write_json(args.json, {"machine": machine, "records": records, "cases": cases,
+                                  "total_s": time.perf_counter() - start})
     say(f"{line}; results {args.json}" + (f"; plot {png}" if png else ""))
     return 0
 
