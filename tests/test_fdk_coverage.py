@@ -15,6 +15,7 @@ from fdk_cases import BALL, CASES, MU, SMALL_VOLUME, max_rel
 import xrayraster as xr
 from references.fdk import fdk_reference
 from references.phantoms import Ellipsoid, project, rtk_shepp_logan, sphere, voxel_values
+from xrayraster.core.geometry import GeometryError
 from xrayraster.recon.fdk import FDKStream, ReconstructionError, fdk
 
 # RTK's rtkdisplaceddetectortest: offsets of the detector centre (mm); RTK gives the last two as
@@ -181,7 +182,8 @@ def test_region_of_interest_scan_of_a_cylinder_wider_than_the_field_of_view(cl):
 
 @pytest.mark.parametrize("options, field", [({"truncation": "yes"}, "truncation"), ({"truncation": 1}, "truncation"),
                                             ({"truncation_width": 0}, "truncation_width"),
-                                            ({"truncation_width": "half"}, "truncation_width")])
-def test_bad_truncation_options_are_refused(cl, options, field):
-    with pytest.raises(ReconstructionError, match=field):
+                                            ({"truncation_width": "half"}, "truncation_width"),
+                                            ({"displaced": 1}, "displaced"), ({"displaced": "yes"}, "displaced")])
+def test_bad_switches_are_refused(cl, options, field):
+    with pytest.raises((ReconstructionError, GeometryError), match=field):
         fdk(np.zeros((60, 30, 64), np.float32), CASES["full"], SMALL_VOLUME, context=cl, **options)

@@ -19,6 +19,12 @@ WEAVE_RESOLVE = ("priority", "boolean")  # how overlapping yarns are settled
 EXPORT_PER = ("family", "yarn")  # one mesh file per yarn family or per yarn
 
 
+def is_switch(value) -> bool:
+    """An automatic-or-forced option (FDK's ``displaced``, ``truncation``): ``"auto"``, ``True`` or
+    ``False``; not 1 or 0, which equal True and False."""
+    return isinstance(value, bool) or (isinstance(value, str) and value == "auto")
+
+
 def check_choice(value, choices: tuple[str, ...], field: str, error: type[Exception]) -> str:
     """``value`` if it is one of ``choices``, else ``error`` naming ``field`` and the choices."""
     if not isinstance(value, str) or value not in choices:

@@ -55,14 +55,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.choices import SCAN_KINDS, check_choice
+from ..core.choices import SCAN_KINDS, check_choice, is_switch
 from ..core.errors import GeometryError
 from ..core.geometry import as_vector_geometry
 from ..core.volume import VolumeGeometry
 
 log = logging.getLogger(__name__)
 
-DISPLACED_CHOICES = ("auto", True, False)
 # "auto" picks Wang's weights when the coverage of the axis is off-centre by more than this share
 # of its width. Measured on RTK's displaced-detector test geometry (docs/reconstruction.md): ½ is
 # better up to about 1.6 % (Wang's weights favour one of two conjugate rays, which differ off the
@@ -106,7 +105,7 @@ def fdk_views(geometry, volume: VolumeGeometry, scan: str = "auto", displaced="a
     axis is off-centre, see :func:`full_scan_weights`), ``True`` (Wang's) or ``False`` (½).
     """
     check_choice(scan, SCAN_KINDS, "scan", GeometryError)
-    if displaced not in DISPLACED_CHOICES:
+    if not is_switch(displaced):
         raise GeometryError(f"displaced must be 'auto', True or False, got {displaced!r}")
     vec = as_vector_geometry(geometry)
     if not isinstance(volume, VolumeGeometry):

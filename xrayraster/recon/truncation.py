@@ -3,9 +3,10 @@ scans), extrapolated smoothly past the detector's edges before the ramp filter.
 
 Why: the ramp filter is not local. A row cut off where the object still attenuates (a composite
 panel wider than the beam) is filtered as if the object ended in a step at the detector edge; the
-step's response runs across the whole field of view as a bright rim and a large negative bias
-that falls towards the centre (cupping). Filling in a plausible continuation of the row before
-filtering removes most of both; the filtered row is still used only on the detector.
+step's response runs across the whole field of view as a bright rim, a bias and cupping (a
+homogeneous cylinder 1.5× wider than the field of view comes out +0.37 of its μ too high inside
+it, docs/reconstruction.md). Filling in a plausible continuation of the row before filtering
+removes most of that; the filtered row is still used only on the detector.
 
 The method (Ohnesorge et al., Med. Phys. 27 (2000) 39, eq. 3, as RTK's truncation correction):
 past each truncated edge the row continues as its point mirror about the edge pixel, which keeps
@@ -20,18 +21,19 @@ applied). The clamp keeps the continuation a non-negative line integral. Its siz
 When (``truncation="auto"``, the default): a row end is truncated when the mean of its
 :data:`EDGE_PIXELS` outermost line integrals, times the redundancy weight at that edge relative
 to the view's largest (0 at a displaced detector's short edge, which the weights already roll
-off; 1 for a centred full scan), is above :data:`THRESHOLD` and above :data:`RELATIVE_THRESHOLD` of the row's largest line integral
-(so the decision does not depend on how the views are batched). ``True`` corrects every row end, ``False`` none. The share of row ends corrected
-is reported in the reconstruction's provenance.
+off; 1 for a centred full scan), is above :data:`THRESHOLD` and above :data:`RELATIVE_THRESHOLD`
+of the row's largest line integral (so the decision does not depend on how the views are
+batched). ``True`` corrects every row end, ``False`` none. The share of row ends corrected is
+reported in the reconstruction's provenance.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from ..core.choices import is_switch
 from ..core.errors import ReconstructionError
 
-TRUNCATION_CHOICES = ("auto", True, False)
 EDGE_PIXELS = 4  # outermost pixels averaged to decide whether a row end is truncated (noise)
 THRESHOLD = 0.02  # line integral (−ln of a 98 % transmission) at the edge that counts as an object
 RELATIVE_THRESHOLD = 0.02  # ... and as a share of the row's largest line integral
@@ -41,7 +43,7 @@ LEFT, RIGHT = 1, 2  # bits of a row's flags: extrapolate before column 0 / after
 
 def check_truncation(truncation, width) -> None:
     """Refuse an unknown ``truncation`` or a padding ``width`` outside (0, 4]."""
-    if truncation not in TRUNCATION_CHOICES or isinstance(truncation, (int, float)) and not isinstance(truncation, bool):
+    if not is_switch(truncation):
         raise ReconstructionError(f"truncation must be 'auto', True or False, got {truncation!r}")
     if isinstance(width, bool) or not isinstance(width, (int, float)) or not 0 < width <= 4:
         raise ReconstructionError(
