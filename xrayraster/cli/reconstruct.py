@@ -52,10 +52,10 @@ def add_parser(subparsers) -> None:
     rec.add_argument("--cutoff", type=float, default=1.0, help="filter cut-off, fraction of Nyquist (default 1)")
     rec.add_argument("--scan", choices=SCAN_KINDS, default="auto",
                      help="full circle (redundancy ½ or displaced-detector weights) or short scan (Parker); default auto")
-    rec.add_argument("--displaced", choices=("auto", "on", "off"), default="auto",
+    rec.add_argument("--displaced", choices=tuple(SWITCH), default="auto",
                      help="full scans: Wang's displaced-detector weights on, off, or chosen from the detector's "
                           "coverage of the axis (default auto; the choice is logged with -v)")
-    rec.add_argument("--truncation", choices=("auto", "on", "off"), default="auto",
+    rec.add_argument("--truncation", choices=tuple(SWITCH), default="auto",
                      help="extrapolate rows cut off by the detector's edges (an object wider than the field of "
                           "view): the rows with signal at an edge (default auto), every row, or none")
     rec.add_argument("--truncation-width", type=float, default=DEFAULT_WIDTH, metavar="SHARE",

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core import fields
-from ..core.choices import FILTERS
+from ..core.choices import FILTERS, is_switch
 from ..core.errors import ConfigError
 from ..core.geometry import ConeBeamGeometry, ParallelBeamGeometry
 from ..core.transform import Transform
@@ -75,7 +75,7 @@ class ScanOptions:
                 raise ConfigError(f"{where}: noise must be true or false, got {d['noise']!r}")
             options["noise"] = d["noise"]
         if "truncation" in d:
-            if d["truncation"] not in ("auto", True, False) or not isinstance(d["truncation"], (str, bool)):
+            if not is_switch(d["truncation"]):
                 raise ConfigError(f"{where}: truncation must be \"auto\", true or false, got {d['truncation']!r}")
             options["truncation"] = d["truncation"]
         if "truncation_width" in d:

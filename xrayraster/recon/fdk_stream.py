@@ -122,7 +122,7 @@ class FDKStream:
         self._provenance = {"method": "FDK" if vec.beam == "cone" else "FBP", "geometry": geometry.to_dict(),
                             "filter": filter, "cutoff": cutoff, "scan": self.views.scan,
                             "displaced": self.views.displaced, "truncation": truncation,
-                            "truncation_width": truncation_width if self._pad else 0.0}
+                            "truncation_width": truncation_width}
         red = self.views.redundancy
         self._edge_weights = red[:, [0, -1]] / np.maximum(red.max(axis=1, keepdims=True), 1e-12)
         self._row_ends = [0, 0]  # extrapolated, seen
