@@ -174,7 +174,8 @@ def test_bad_input_exits_2_with_a_message_and_writes_nothing(scene, extra, messa
 def test_a_failed_write_leaves_the_old_file_and_no_temporary(tmp_path, monkeypatch, gl, capsys):
     """Atomic output: a crash while writing keeps the previous file intact and removes the partial one."""
     out = tmp_path / "result.tif"
-    out.write_bytes(b"previous result")
+    assert cli.main(["render", str(EXAMPLE), "-o", str(out), "--path-lengths"]) == 0
+    previous = out.read_bytes()
 
     def half_write(path, *args, **kwargs):
         Path(path).write_bytes(b"II*\x00 partial")
@@ -183,8 +184,8 @@ def test_a_failed_write_leaves_the_old_file_and_no_temporary(tmp_path, monkeypat
     monkeypatch.setattr(tifffile, "imwrite", half_write)
     assert cli.main(["render", str(EXAMPLE), "-o", str(out), "--path-lengths"]) == 1
     assert capsys.readouterr().err == "xrayraster: error: disk full\n"
-    assert out.read_bytes() == b"previous result"
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["result.tif"]
+    assert out.read_bytes() == previous
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["result.png", "result.tif"]
 
 
 # --------------------------------------------------------------------------- radiographs (no --path-lengths)

@@ -78,7 +78,8 @@ def scanned(gl, cl, tmp_path_factory):
     (root / "thick.toml").write_text(thick_text())
     out = root / "out"
     out.mkdir()
-    (out / "scan.json").write_text(json.dumps({"generator": "xrayraster scan"}))
+    # An earlier scan's record lists its files: those (and only those) may go.
+    (out / "scan.json").write_text(json.dumps({"generator": "xrayraster scan", "files": ["scan.json", "stale.txt"]}))
     (out / "stale.txt").write_text("from the earlier scan")
     assert cli.main(["scan", str(root / "thick.toml"), "-o", str(out), "--quiet"]) == 0
     volume = tifffile.imread(out / "volume.tif")
@@ -186,17 +187,22 @@ def test_refuses_a_foreign_directory(tmp_path, capsys):
     out.mkdir()
     (out / "notes.txt").write_text("mine")
     assert cli.main(["scan", str(EXAMPLE), "-o", str(out), "--quiet"]) == 2
-    assert "not an earlier output" in capsys.readouterr().err
+    assert "notes.txt" in capsys.readouterr().err
     assert [p.name for p in out.iterdir()] == ["notes.txt"]
 
 
 def test_an_interrupted_scan_leaves_nothing(tmp_path, monkeypatch):
-    class Broken:
-        def save(self, directory):
-            (Path(directory) / "volume.tif").write_bytes(b"half")
-            raise KeyboardInterrupt
+    """Ctrl-C while the result is saved (its volume written, the slices half-written)."""
+    grid = xr.VolumeGeometry((2, 3, 4), 0.5)
+    result = xr.ScanResult(xr.Volume(np.ones(grid.shape, np.float32), grid),
+                           xr.LabelVolume(np.ones(grid.shape, np.uint8), grid), {"generator": "xrayraster scan"})
 
-    monkeypatch.setattr("xrayraster.cli.scan.scan", lambda loaded, **options: Broken())
+    def interrupted(path, *args):
+        Path(path).write_bytes(b"half")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(importlib.import_module("xrayraster.pipeline.scan"), "write_slices", interrupted)
+    monkeypatch.setattr("xrayraster.cli.scan.scan", lambda loaded, **options: result)
     assert cli.main(["scan", str(EXAMPLE), "-o", str(tmp_path / "out"), "--quiet"]) == 130
     assert list(tmp_path.iterdir()) == []
 

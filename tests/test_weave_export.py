@@ -172,7 +172,7 @@ def test_refuses_to_replace_a_directory_it_did_not_write(tmp_path, capsys):
     (tmp_path / "out").mkdir()
     (tmp_path / "out" / "notes.txt").write_text("mine")
     assert cli.main(["weave", str(tmp_path / "weave.toml"), "-o", str(tmp_path / "out"), "--quiet"]) == 2
-    assert "not an earlier output" in capsys.readouterr().err
+    assert "notes.txt" in capsys.readouterr().err
     assert [p.name for p in (tmp_path / "out").iterdir()] == ["notes.txt"]
 
 

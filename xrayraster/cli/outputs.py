@@ -7,26 +7,23 @@
 - an output that is an input (the same path, the same path once links and ``..`` are resolved,
   or the same file by :func:`os.path.samefile`), side outputs (quick-look, fractions) included;
 - two outputs that are one file;
-- an output that is an existing directory;
-- an output directory that cannot be written: it is probed by creating it (and any missing
-  parents) and a temporary file in it, then removing both, as permission bits alone do not say
-  (root ignores them; read-only mounts, ``/proc`` and a parent that is a regular file do not).
+- an output that is an existing directory, or an existing file xrayraster did not write
+  (:func:`~xrayraster.core.ownership.check_replaceable_files`: only our own earlier outputs are
+  replaced; an output that is a link is written where it points);
+- an output directory that cannot be written (:func:`~xrayraster.core.files.probe_writable`).
 """
 
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 from ..core.errors import ConfigError
+from ..core.files import probe_writable
+from ..core.ownership import check_replaceable_files
+from ..core.tiff import quicklook_path
 
 TIFF_SUFFIXES = (".tif", ".tiff")
-
-
-def quicklook_path(out: Path) -> Path:
-    """The quick-look PNG beside the TIFF ``out``."""
-    return out.with_suffix(".png")
 
 
 def check_main_output(out: Path) -> None:
@@ -42,35 +39,6 @@ def _same_file(a: Path, b: Path) -> bool:
         return os.path.samefile(a, b)
     except OSError:  # one of them does not exist (yet)
         return False
-
-
-def _probe_directory(directory: Path, out: Path) -> None:
-    """Create ``directory`` (and missing parents) and a file in it, then remove what was created."""
-    missing = []
-    d = directory
-    while not d.exists() and d != d.parent:
-        missing.append(d)
-        d = d.parent
-    created = []
-    try:
-        for m in reversed(missing):
-            m.mkdir()
-            created.append(m)
-        if not directory.is_dir():
-            raise NotADirectoryError(20, "not a directory")
-        fd, probe = tempfile.mkstemp(dir=directory, prefix=".xrayraster-probe.")
-        os.close(fd)
-        os.unlink(probe)
-    except OSError as exc:
-        reason = exc.strerror or str(exc)
-        raise ConfigError(f"cannot write {out}: its directory {directory} cannot be created or written ({reason}); "
-                          "choose another -o") from None
-    finally:
-        for m in reversed(created):
-            try:
-                m.rmdir()
-            except OSError:  # another process put something there meanwhile: leave it
-                pass
 
 
 def check_outputs(outputs, inputs, *, main_is_tiff: bool = True) -> None:
@@ -96,5 +64,5 @@ def check_outputs(outputs, inputs, *, main_is_tiff: bool = True) -> None:
         for b in outputs[i + 1:]:
             if _same_file(a, b):
                 raise ConfigError(f"outputs {a} and {b} are one file; choose another -o")
-    for directory in dict.fromkeys(out.parent for out in outputs):
-        _probe_directory(directory, outputs[0])
+    for directory in dict.fromkeys(out.parent for out in check_replaceable_files(outputs)):
+        probe_writable(directory, outputs[0])

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..gl.voxelize import voxelize
+from ..gl.voxelize import fractions_path, voxelize
 from ..io.scan_file import read_scan_file
 from ..io.scene_file import load_scene_file
 from .options import add_scan_file, positive_int
@@ -26,10 +26,6 @@ def add_parser(subparsers) -> None:
                           "OUT_fractions.tif)")
     vox.add_argument("-v", "--verbose", action="store_true")
     vox.set_defaults(run=run)
-
-
-def fractions_path(out: Path) -> Path:
-    return out.with_name(f"{out.stem}_fractions.tif")
 
 
 def run(args) -> int:

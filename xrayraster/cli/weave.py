@@ -2,7 +2,8 @@
 
 ``DIR`` is built under a temporary name and moved into place when complete
 (:func:`~xrayraster.core.files.atomic_directory`); an existing ``DIR`` is replaced only if it holds
-an earlier ``xrayraster weave`` output. It then holds the mesh files, ``report.json``,
+nothing but an earlier ``xrayraster weave`` output (``--force``: its files are replaced, anything
+else in it is kept). It then holds the mesh files, ``report.json``,
 ``scene.toml`` (``xrayraster render DIR/scene.toml``) and ``scan.json``, a voxel grid over the
 sample at the scene's magnified pixel pitch (``xrayraster voxelize DIR/scene.toml --scan-file
 DIR/scan.json``).
@@ -16,7 +17,7 @@ from pathlib import Path
 from ..core.choices import EXPORT_PER, MESH_FORMATS, WEAVE_RESOLVE
 from ..core.files import atomic_directory
 from ..io.weave_file import framing_geometry, load_weave_file, sample_grid, write_scan_file, write_scene_file
-from ..weave.export import is_export
+from ..weave.export import GENERATOR, REPORT_NAME
 
 SCENE_NAME, SCAN_NAME = "scene.toml", "scan.json"
 
@@ -25,7 +26,9 @@ def add_parser(subparsers) -> None:
     weave = subparsers.add_parser("weave", help="generate a woven sample (meshes, report, scene file) from a weave file")
     weave.add_argument("weave", type=Path, help="weave file (docs/weave.md): a [weave] table")
     weave.add_argument("-o", "--out", dest="out", metavar="DIR", type=Path, required=True,
-                       help="output directory (replaced only if it holds an earlier xrayraster weave output)")
+                       help="output directory (replaced only if it holds nothing but an earlier xrayraster weave output)")
+    weave.add_argument("--force", action="store_true",
+                       help="replace an earlier weave's files in DIR although DIR holds other files (those are kept)")
     weave.add_argument("--per", choices=EXPORT_PER, default="family",
                        help="one mesh file per yarn family (default) or per yarn")
     weave.add_argument("--format", choices=MESH_FORMATS, default="stl", help="mesh file format (default stl)")
@@ -40,8 +43,9 @@ def add_parser(subparsers) -> None:
 def run(args) -> int:
     loaded = load_weave_file(args.weave)
     start = time.perf_counter()
-    with atomic_directory(args.out, replaceable=is_export) as tmp:
-        report = loaded.sample.export(tmp, materials=loaded.materials, per=args.per, fmt=args.format,
+    with atomic_directory(args.out, marker=REPORT_NAME, generator=GENERATOR, overwrite=args.force,
+                          names=(REPORT_NAME, SCENE_NAME, SCAN_NAME)) as tmp:
+        report = loaded.sample.write_export(tmp, materials=loaded.materials, per=args.per, fmt=args.format,
                                       resolve=args.resolve, progress=not args.quiet)
         geometry = framing_geometry(report["box_mm"])
         write_scene_file(tmp / SCENE_NAME, report, geometry)

@@ -1,17 +1,20 @@
-"""Files written atomically: a reader never sees a half-written file, and a failed write leaves none.
+"""Files and directories written atomically: a reader never sees a half-written output, and a
+failed write leaves none. What an output may replace is :mod:`~xrayraster.core.ownership`'s rule.
 
-The temporary is a hidden file beside the output, ``.NAME.<host>.<pid>.<random><suffix>``: the
-writer's host tag (:data:`HOST_TAG`) and process id are in its name. A process killed mid-write
-(SIGKILL, power loss) cannot remove its temporary, so every write of ``NAME`` first removes the
-*stale* temporaries of ``NAME``: those written on this host by a process that no longer exists.
-A temporary whose writer is alive (or may be: another user's process, or a process id the system
-has since reused) is never touched, nor is one from another host (a shared file system) or one
-in the older unnamed form (``.NAME.<random><suffix>``, written before the pid was in the name):
-those are left for a person to remove.
+The temporary is hidden beside the output, ``.NAME.<host>.<pid>.<random><suffix>`` (a directory
+for :func:`atomic_directory`): the writer's host tag (:data:`HOST_TAG`) and process id are in its
+name. A process killed mid-write (SIGKILL, power loss) cannot remove its temporary, so every
+write of ``NAME`` first removes the *stale* temporaries of ``NAME``: those written on this host by
+a process that no longer exists. A temporary whose writer is alive (or may be: another user's
+process, or a process id the system has since reused) is never touched, nor is one from another
+host (a shared file system) or one in the older unnamed form (``.NAME.<random><suffix>``, written
+before the pid was in the name): those are left for a person to remove.
 """
 
 from __future__ import annotations
 
+import json
+import logging
 import os
 import re
 import shutil
@@ -22,6 +25,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from .errors import ConfigError
+from .ownership import FILE_SUFFIXES, directory_entries, recorded_names, resolved_output
 
 
 def _read_umask() -> int:
@@ -79,7 +83,10 @@ def remove_stale_temporaries(path) -> list[Path]:
     removed = []
     for tmp in stale_temporaries(path):
         try:
-            tmp.unlink()
+            if tmp.is_dir() and not tmp.is_symlink():
+                shutil.rmtree(tmp)  # an atomic_directory's
+            else:
+                tmp.unlink()
             removed.append(tmp)
         except FileNotFoundError:  # another writer of the same output removed it first
             pass
@@ -107,39 +114,159 @@ def atomic_write(path, write) -> Path:
     return path
 
 
-
 def atomic_write_text(path, text: str) -> Path:
     """Write ``text`` (UTF-8) to ``path`` with :func:`atomic_write`."""
     return atomic_write(path, lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))
 
-@contextmanager
-def atomic_directory(path, *, replaceable):
-    """Build a directory of outputs under a temporary name beside ``path``, then move it into place.
 
-    Yields the temporary directory (a ``Path``) to write into. On success an existing ``path`` is
-    replaced only if ``replaceable(path)`` says it holds an earlier output of the same command
-    (else :class:`~xrayraster.core.errors.ConfigError`, checked before any work); readers see the
-    old directory or the new one, never a mix. On failure the temporary is removed and ``path`` is
-    untouched. The swap is two renames (old aside, new in); a crash between them leaves the old
-    output under ``.NAME.old.<host>.<pid>`` and no ``path``, never a half-written one.
+def probe_writable(directory: Path, out: Path) -> None:
+    """Refuse (:class:`~xrayraster.core.errors.ConfigError`, naming ``out``) a ``directory`` that
+    cannot be written. It is probed by creating it (and missing parents) and a temporary file in it,
+    then removing what was created, as permission bits alone do not say (root ignores them;
+    read-only mounts, ``/proc`` and a parent that is a regular file do not)."""
+    missing = []
+    d = directory
+    while not d.exists() and d != d.parent:
+        missing.append(d)
+        d = d.parent
+    created = []
+    try:
+        for m in reversed(missing):
+            m.mkdir()
+            created.append(m)
+        if not directory.is_dir():
+            raise NotADirectoryError(20, "not a directory")
+        fd, probe = tempfile.mkstemp(dir=directory, prefix=".xrayraster-probe.")
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        reason = exc.strerror or str(exc)
+        raise ConfigError(f"cannot write {out}: its directory {directory} cannot be created or written ({reason}); "
+                          "choose another output") from None
+    finally:
+        for m in reversed(created):
+            try:
+                m.rmdir()
+            except OSError:  # another process put something there meanwhile: leave it
+                pass
+
+
+def check_output_directory(path, *, marker: str, generator: str, overwrite: bool = False,
+                           names=()) -> Path:
+    """Refuse, before any work, an output directory ``generator`` may not write
+    (:mod:`~xrayraster.core.ownership`). Returns ``path`` with links resolved.
+
+    Refused: a name with a file suffix (``out.tif``); a parent that cannot be written
+    (:func:`probe_writable`); an existing file; a directory holding foreign entries, unless
+    ``overwrite``; with ``overwrite``, a foreign entry named as one of ``names`` (the files the
+    command will write, as far as known). The message names the entries, clashes first.
     """
     path = Path(path)
-    if path.exists() and not (path.is_dir() and (not any(path.iterdir()) or replaceable(path))):
-        what = "a file" if not path.is_dir() else "a directory that holds other files"
-        raise ConfigError(f"{path} is {what}, not an earlier output of this command; choose another output "
-                          "directory or remove it")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.{HOST_TAG}.{os.getpid()}."))
+    if path.suffix.lower() in FILE_SUFFIXES:
+        raise ConfigError(f"{path}: {generator} writes a directory, and this name ends in {path.suffix} like a file; "
+                          f"give a directory name such as {path.with_suffix('')}")
+    target = resolved_output(path)
+    probe_writable(target.parent, path)
+    if not target.exists():
+        return target
+    if not target.is_dir():
+        raise ConfigError(f"{path} is a file, not a directory; {generator} writes a directory: choose another name")
+    _, foreign = directory_entries(target, marker, generator)
+    if not foreign:
+        return target
+    clashes = sorted(set(foreign) & set(names))
+    named = clashes + [name for name in foreign if name not in clashes]  # what it would replace first
+    shown = ", ".join(named[:3]) + (f" and {len(named) - 3} more" if len(named) > 3 else "")
+    if not overwrite:
+        raise ConfigError(f"{path} holds files that {generator} did not write ({shown}); they are never removed: "
+                          "choose another directory, or pass --force (overwrite=True) to replace only this "
+                          "command's earlier outputs and keep them")
+    if clashes:
+        raise ConfigError(f"{path}: {', '.join(clashes)} not written by {generator} would be replaced; "
+                          "move it away or choose another directory")
+    return target
+
+
+@contextmanager
+def atomic_directory(path, *, marker: str, generator: str, overwrite: bool = False, names=()):
+    """Build a directory of outputs under a temporary name beside ``path``, then move it into place.
+
+    Yields the temporary directory (a ``Path``) to write into; the body must write ``marker``, a
+    JSON object with ``"generator": generator``, to which the names written are added as
+    ``"files"`` (the record :mod:`~xrayraster.core.ownership` reads). What ``path`` may be is
+    checked on entry (:func:`check_output_directory`: links resolved,
+    a directory with foreign entries refused unless ``overwrite``) and again before the move.
+
+    - ``path`` missing, empty, or holding only what an earlier output recorded: the new directory
+      replaces it by two renames (old aside, new in), so readers see the old output or the new,
+      never a mix; the old output's recorded files are then removed, and nothing else. A crash
+      between the renames leaves the old output under ``.NAME.old.<host>.<pid>`` and no ``path``.
+    - ``overwrite`` and foreign entries: each new file is renamed into ``path`` (atomic one by
+      one), recorded files the new output lacks are removed, the marker comes last; the foreign
+      entries stay as they were.
+
+    On failure the temporary is removed and ``path`` is untouched. Stale temporaries of ``path``
+    (a killed run's) are removed first, as :func:`atomic_write` does for files.
+    """
+    target = check_output_directory(path, marker=marker, generator=generator, overwrite=overwrite, names=names)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale_temporaries(target)
+    tmp = Path(tempfile.mkdtemp(dir=target.parent, prefix=f".{target.name}.{HOST_TAG}.{os.getpid()}."))
     try:
         yield tmp
+        written = _record_files(tmp, marker)
         os.chmod(tmp, NEW_DIR_MODE)
-        if path.exists():
-            old = path.parent / f".{path.name}.old.{HOST_TAG}.{os.getpid()}"
-            os.replace(path, old)
-            os.replace(tmp, path)
-            shutil.rmtree(old)
+        # Again: the directory may have changed while the work ran.
+        check_output_directory(target, marker=marker, generator=generator, overwrite=overwrite, names=written)
+        if not target.exists():
+            os.replace(tmp, target)
+        elif not directory_entries(target, marker, generator)[1]:
+            _swap(tmp, target, marker, generator)
         else:
-            os.replace(tmp, path)
+            _merge(tmp, target, written, marker, generator)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+
+
+def _record_files(directory: Path, marker: str) -> list[str]:
+    """Add the sorted names in ``directory`` to its JSON ``marker`` as ``"files"``; returns them."""
+    names = sorted(os.listdir(directory))
+    if marker not in names:
+        raise RuntimeError(f"an output directory must hold its record {marker}")  # a bug of the command
+    record = json.loads((directory / marker).read_text(encoding="utf-8"))
+    atomic_write_text(directory / marker, json.dumps({**record, "files": names}, indent=2) + "\n")
+    return names
+
+
+def _swap(tmp: Path, target: Path, marker: str, generator: str) -> None:
+    """Replace ``target``, which holds only recorded names, by ``tmp``; remove just those names."""
+    old = target.parent / f".{target.name}.old.{HOST_TAG}.{os.getpid()}"
+    os.replace(target, old)
+    os.replace(tmp, target)
+    recorded, _ = directory_entries(old, marker, generator)
+    for name in recorded:
+        _remove_entry(old / name)
+    try:
+        old.rmdir()
+    except OSError:  # something appeared in the old directory meanwhile: it is not ours to delete
+        logging.getLogger(__name__).warning("kept %s: it holds files written there during the run", old)
+
+
+def _merge(tmp: Path, target: Path, written: list[str], marker: str, generator: str) -> None:
+    """Move ``tmp``'s files into ``target`` beside its foreign entries, the marker last."""
+    before = recorded_names(target, marker, generator) or frozenset()
+    for name in written:
+        if name != marker:
+            os.replace(tmp / name, target / name)
+    for name in before - set(written):
+        _remove_entry(target / name)
+    os.replace(tmp / marker, target / marker)
+    tmp.rmdir()
+
+
+def _remove_entry(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path)
+    else:
+        path.unlink(missing_ok=True)

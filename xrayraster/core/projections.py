@@ -15,7 +15,7 @@ import numpy as np
 
 from .errors import ConfigError
 from .geometry import geometry_from_dict
-from .tiff import pixel_size_mm, read_tiff, write_projections, write_quicklook
+from .tiff import checked_outputs, pixel_size_mm, read_tiff, write_projections, write_quicklook
 
 # quantity → (unit, axes, description). A line integral and a transmission are ratios ("1").
 QUANTITIES = {
@@ -93,10 +93,11 @@ class Projections:
         ``quicklook``, a PNG beside it (``path`` with suffix ``.png``: view 0, summed over
         materials for path lengths, +z up, with a scale bar at the detector). Returns ``path``;
         :meth:`load` reads it back."""
-        out = write_projections(path, self)
-        if quicklook:
+        out, *png = checked_outputs(path, quicklook=quicklook)
+        write_projections(out, self)
+        if png:
             first = self.data[0].sum(axis=0) if self.quantity == "path_length" else self.data[0]
-            write_quicklook(out.with_suffix(".png"), first, pixel_size_mm(self.geometry), where="at the detector")
+            write_quicklook(png[0], first, pixel_size_mm(self.geometry), where="at the detector")
         return out
 
     @classmethod

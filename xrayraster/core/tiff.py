@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from .files import atomic_write
+from .ownership import SOFTWARE, check_replaceable_files, resolved_output
 from .volume import VolumeGeometry
 
 QUICKLOOK_MIN_PX = 512  # a quick-look's long side is upscaled (nearest neighbour, integer factor) to at least this
@@ -34,9 +35,9 @@ def write_tiff(path, data: np.ndarray, *, axes: str, pixel_size_mm: tuple[float,
     if spacing_mm is not None:
         metadata["spacing"] = float(spacing_mm)
     resolution = (1.0 / pixel_size_mm[1], 1.0 / pixel_size_mm[0])
-    return atomic_write(
-        path, lambda tmp: tifffile.imwrite(tmp, data, imagej=True, metadata=metadata, resolution=resolution)
-    )
+    # The Software tag marks the file as ours (core.ownership): a later write may replace it.
+    return atomic_write(path, lambda tmp: tifffile.imwrite(tmp, data, imagej=True, metadata=metadata,
+                                                           resolution=resolution, software=SOFTWARE))
 
 
 def read_tiff(path) -> tuple[np.ndarray, dict]:
@@ -92,6 +93,31 @@ def quicklook_factor(shape) -> int:
     return max(1, math.ceil(QUICKLOOK_MIN_PX / max(max(shape), 1)))
 
 
+def quicklook_path(out) -> Path:
+    """The quick-look PNG beside the TIFF ``out``."""
+    return Path(out).with_suffix(".png")
+
+
+def checked_outputs(path, *, quicklook: bool, beside=()) -> list[Path]:
+    """``path`` (links resolved), then its quick-look PNG if ``quicklook``, then the files named
+    ``beside`` it: checked together before any is written, so a ``save`` that would replace a file
+    xrayraster did not write refuses before writing anything (:mod:`~xrayraster.core.ownership`)."""
+    out = resolved_output(path)
+    sides = ([quicklook_path(out)] if quicklook else []) + [out.with_name(name) for name in beside]
+    return check_replaceable_files([out, *sides])
+
+
+def png_text(**chunks):
+    """PNG text chunks for PIL's ``save(pnginfo=...)``: ``Software`` (the mark
+    :mod:`~xrayraster.core.ownership` reads) and ``chunks``."""
+    from PIL import PngImagePlugin
+
+    info = PngImagePlugin.PngInfo()
+    for key, value in {"Software": SOFTWARE, **chunks}.items():
+        info.add_text(key, value)
+    return info
+
+
 def write_quicklook(path, image: np.ndarray, pixel_size_mm: float | tuple[float, float] | None = None, *,
                     where: str = "") -> Path:
     """8-bit PNG scaled from 0 to the image maximum (a quick look, not data).
@@ -106,15 +132,14 @@ def write_quicklook(path, image: np.ndarray, pixel_size_mm: float | tuple[float,
     and the PNG's text chunks ``mm_per_pixel`` (of the image, before enlarging), ``upscale`` and
     ``scale_bar`` say the same.
     """
-    from PIL import Image, ImageDraw, PngImagePlugin
+    from PIL import Image, ImageDraw
 
     image = np.asarray(image, dtype=np.float64)
     peak = float(image.max()) if image.size else 0.0
     scaled = np.zeros(image.shape, np.uint8) if not peak > 0 else np.round(255 * np.clip(image / peak, 0, 1)).astype(np.uint8)
     factor = quicklook_factor(scaled.shape)
     picture = np.ascontiguousarray(np.repeat(np.repeat(scaled[::-1], factor, axis=0), factor, axis=1))
-    info = PngImagePlugin.PngInfo()
-    info.add_text("upscale", str(factor))
+    info = png_text(upscale=str(factor))
     if pixel_size_mm is None:
         canvas = Image.fromarray(picture)
     else:

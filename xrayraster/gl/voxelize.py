@@ -32,6 +32,7 @@ the output array, not the GPU, bounds the size.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -39,7 +40,7 @@ from ..core.choices import VOXELIZE_METHODS, check_choice
 from ..core.errors import VoxelizeError
 from ..core.geometry import VectorGeometry
 from ..core.memory import available_memory
-from ..core.tiff import write_quicklook, write_volume
+from ..core.tiff import checked_outputs, write_quicklook, write_volume
 from ..core.volume import VolumeGeometry
 from ..scene.scene import Scene
 from .context import GLContext
@@ -71,20 +72,27 @@ class LabelVolume:
         (``volume_geometry``) as JSON metadata; with fractions, ``<stem>_fractions.tif`` beside it
         (float32, z, label, y, x: one channel per label of :attr:`labels`); and, with
         ``quicklook``, a PNG of the central slice with a scale bar. Returns ``path``."""
+        fractions = [fractions_path(Path(path)).name] if self.fractions is not None else []
+        out, *side = checked_outputs(path, quicklook=quicklook, beside=fractions)
+        png = side[0] if quicklook else None
         present = sorted(int(k) for k in np.unique(self.data) if k)
-        out = write_volume(path, self.data, self.geometry, {
+        write_volume(out, self.data, self.geometry, {
             "quantity": "label (0: background; else the label of the highest-priority object at the voxel centre)",
             "labels_present": present, **self.provenance})
         if self.fractions is not None:
             # ImageJ hyperstacks are ordered T Z C Y X: one channel per label.
-            write_volume(out.with_name(f"{out.stem}_fractions.tif"), self.fractions.transpose(1, 0, 2, 3),
-                         self.geometry, channels="label", info={
-                             "quantity": "share of each voxel owned by each label, from sub-voxel centres",
-                             "channel_labels": list(self.labels or ())})
-        if quicklook:
+            write_volume(side[-1], self.fractions.transpose(1, 0, 2, 3), self.geometry, channels="label", info={
+                "quantity": "share of each voxel owned by each label, from sub-voxel centres",
+                "channel_labels": list(self.labels or ())})
+        if png is not None:
             middle = self.data[self.data.shape[0] // 2].astype(np.float32)
-            write_quicklook(out.with_suffix(".png"), middle, self.geometry.voxel_size[1:])
+            write_quicklook(png, middle, self.geometry.voxel_size[1:])
         return out
+
+
+def fractions_path(out: Path) -> Path:
+    """Where :meth:`LabelVolume.save` puts the fractions of the labels saved at ``out``."""
+    return out.with_name(f"{out.stem}_fractions.tif")
 
 
 def column_geometry(volume: VolumeGeometry) -> VectorGeometry:

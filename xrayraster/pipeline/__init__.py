@@ -6,7 +6,7 @@ command line (``xr.scan``), which stays a thin layer on top (``xrayraster scan``
 """
 
 from .compare import Comparison, compare
-from .scan import ScanResult, is_scan_output, scan
+from .scan import ScanResult, check_scan_output, scan
 from .scan_file import ScanFile, ScanOptions, load_scan_file
 
-__all__ = ["Comparison", "ScanFile", "ScanOptions", "ScanResult", "compare", "is_scan_output", "load_scan_file", "scan"]
+__all__ = ["Comparison", "ScanFile", "ScanOptions", "ScanResult", "compare", "check_scan_output", "load_scan_file", "scan"]

@@ -38,6 +38,7 @@ import numpy as np
 
 from ..core.errors import CompareError
 from ..core.files import atomic_write
+from ..core.ownership import SOFTWARE, check_replaceable_files
 
 MAX_BINS = 256  # default histogram bins at most: over a woven sample's range (about -0.3 to 1.2 cm⁻¹) 0.006 cm⁻¹
 SSIM_WINDOW = 7  # scikit-image's default window side, voxels
@@ -205,8 +206,10 @@ def write_histogram_png(path, histograms: Comparison | Mapping[str, Histogram], 
     """Plot the histograms (densities, so volumes of different sizes overlay) as a PNG at ``path``
     (atomically): each curve's highest :data:`PLOT_PEAKS` peaks as dashed lines and as numbers
     in the legend below the plot; a :class:`Comparison` also puts its metrics in the title.
-    Returns ``path``."""
+    An existing file at ``path`` is replaced only if xrayraster wrote it (a link is followed).
+    Returns the path written."""
     _require("matplotlib", "the histogram plot")
+    [target] = check_replaceable_files([path])
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -234,7 +237,7 @@ def write_histogram_png(path, histograms: Comparison | Mapping[str, Histogram], 
     figure.legend(loc="outside lower center", fontsize="small")  # below the axes: long file names squeeze nothing
     if title:
         axes.set_title(textwrap.fill(title, 100), fontsize="small")
-    return atomic_write(path, lambda tmp: figure.savefig(tmp, format="png", dpi=100))
+    return atomic_write(target, lambda tmp: figure.savefig(tmp, format="png", dpi=100, metadata={"Software": SOFTWARE}))
 
 
 def _require(module: str, what: str):

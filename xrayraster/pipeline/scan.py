@@ -18,10 +18,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.files import atomic_write, atomic_write_text
+from ..core.files import atomic_directory, atomic_write, atomic_write_text, check_output_directory
 from ..core.projections import Projections
 from ..core.provenance import package_version
-from ..core.tiff import quicklook_factor
+from ..core.tiff import png_text, quicklook_factor, quicklook_path
 from ..gl.voxelize import LabelVolume, voxelize
 from ..physics.detector import Detector
 from ..recon.fdk import FDKStream, Volume
@@ -29,7 +29,7 @@ from ..recon.opencl import CLContext
 from ..simulate.renderer import Renderer
 from .scan_file import ScanFile, load_scan_file
 
-__all__ = ["ScanResult", "is_scan_output", "scan"]
+__all__ = ["ScanResult", "check_scan_output", "scan"]
 
 GENERATOR = "xrayraster scan"
 VOLUME_NAME, LABELS_NAME, METADATA_NAME, SLICES_NAME = "volume.tif", "labels.tif", "scan.json", "slices.png"
@@ -62,28 +62,35 @@ class ScanResult:
     metadata: dict
     projections: Projections | None = None  # kept only when asked (scan(..., keep_projections=True))
 
-    def save(self, directory) -> Path:
+    def save(self, directory, *, overwrite: bool = False) -> Path:
         """Write ``volume.tif`` (float32, cm⁻¹), ``labels.tif``, ``scan.json`` and ``slices.png`` into
-        ``directory`` (made if missing; each file written atomically), and ``projections.tif`` (line
-        integrals, with their quick-look) when the result holds them. Returns ``directory``."""
-        directory = Path(directory)
-        directory.mkdir(parents=True, exist_ok=True)
-        self.volume.save(directory / VOLUME_NAME, quicklook=False)
-        if self.projections is not None:
-            self.projections.save(directory / PROJECTIONS_NAME)
-        self.labels.save(directory / LABELS_NAME, quicklook=False)
-        write_slices(directory / SLICES_NAME, self.volume.data, self.labels.data)
-        text = json.dumps(self.metadata, indent=2) + "\n"
-        atomic_write_text(directory / METADATA_NAME, text)
-        return directory
+        ``directory``, and ``projections.tif`` (line integrals, with their quick-look) when the result
+        holds them; ``scan.json`` records the names written. The directory is built beside
+        ``directory`` and moved into place whole (:func:`~xrayraster.core.files.atomic_directory`):
+        an existing ``directory`` is replaced only if it holds nothing but an earlier scan's files,
+        else :class:`~xrayraster.ConfigError`; ``overwrite=True`` then replaces the earlier scan's
+        files and keeps every other entry. A link is followed. Returns ``directory``."""
+        with atomic_directory(directory, marker=METADATA_NAME, generator=GENERATOR, overwrite=overwrite,
+                              names=output_names(self.projections is not None)) as tmp:
+            self.volume.save(tmp / VOLUME_NAME, quicklook=False)
+            if self.projections is not None:
+                self.projections.save(tmp / PROJECTIONS_NAME)
+            self.labels.save(tmp / LABELS_NAME, quicklook=False)
+            write_slices(tmp / SLICES_NAME, self.volume.data, self.labels.data)
+            atomic_write_text(tmp / METADATA_NAME, json.dumps(self.metadata, indent=2) + "\n")
+        return Path(directory)
 
 
-def is_scan_output(directory) -> bool:
-    """Whether ``directory`` holds an earlier ``xrayraster scan`` output (its scan.json says so)."""
-    try:
-        return json.loads((Path(directory) / METADATA_NAME).read_text()).get("generator") == GENERATOR
-    except (OSError, ValueError, AttributeError):
-        return False
+def output_names(projections: bool) -> tuple[str, ...]:
+    """The names a scan writes into its directory (with or without the projections)."""
+    kept = (PROJECTIONS_NAME, quicklook_path(Path(PROJECTIONS_NAME)).name) if projections else ()
+    return (VOLUME_NAME, LABELS_NAME, METADATA_NAME, SLICES_NAME, *kept)
+
+
+def check_scan_output(directory, *, overwrite: bool = False, projections: bool = False) -> Path:
+    """Refuse, before any work, an output directory that :meth:`ScanResult.save` would refuse."""
+    return check_output_directory(directory, marker=METADATA_NAME, generator=GENERATOR, overwrite=overwrite,
+                                  names=output_names(projections))
 
 
 def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False) -> ScanResult:
@@ -247,4 +254,4 @@ def write_slices(path, volume: np.ndarray, labels: np.ndarray) -> Path:
             x += big.shape[1] + _GAP_PX
         y += h + _GAP_PX
     image = Image.fromarray(canvas)
-    return atomic_write(Path(path), lambda tmp: image.save(tmp, format="PNG"))
+    return atomic_write(Path(path), lambda tmp: image.save(tmp, format="PNG", pnginfo=png_text()))

@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core.tiff import write_quicklook, write_volume
+from ..core.tiff import checked_outputs, write_quicklook, write_volume
 from ..core.volume import VolumeGeometry
 
 MM_TO_CM = 10.0  # μ in mm⁻¹ × 10 = cm⁻¹
@@ -33,8 +33,9 @@ class Volume:
         PNG of the central slice (negative values shown as 0, with a scale bar) beside it.
         Returns ``path``."""
         info = {"quantity": "linear attenuation coefficient", "units": self.unit, **self.provenance}
-        out = write_volume(path, self.data, self.geometry, info)
-        if quicklook:
+        out, *png = checked_outputs(path, quicklook=quicklook)
+        write_volume(out, self.data, self.geometry, info)
+        if png:
             middle = np.clip(self.data[self.data.shape[0] // 2], 0, None)
-            write_quicklook(out.with_suffix(".png"), middle, self.geometry.voxel_size[1:])
+            write_quicklook(png[0], middle, self.geometry.voxel_size[1:])
         return out

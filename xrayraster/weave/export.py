@@ -32,7 +32,7 @@ from ..scene.materials import Material
 from .manifold_mesh import box_minus, from_manifold, to_manifold, union, without_slivers
 
 __all__ = [
-    "REPORT_NAME", "Part", "is_export", "material_entry", "merge_meshes", "mesh_bounds", "occupied_volumes",
+    "GENERATOR", "REPORT_NAME", "Part", "material_entry", "merge_meshes", "mesh_bounds", "occupied_volumes",
     "settle", "write_parts", "write_report",
 ]
 
@@ -111,14 +111,6 @@ def write_report(report: dict, directory) -> Path:
     """``report.json`` in ``directory``, written atomically."""
     text = json.dumps({"generator": GENERATOR, "version": package_version(), **report}, indent=2) + "\n"
     return atomic_write_text(Path(directory) / REPORT_NAME, text)
-
-
-def is_export(directory) -> bool:
-    """Whether ``directory`` holds an earlier export (its report names this generator)."""
-    try:
-        return json.loads((Path(directory) / REPORT_NAME).read_text(encoding="utf-8")).get("generator") == GENERATOR
-    except (OSError, ValueError, AttributeError):
-        return False
 
 
 def material_entry(material: Material) -> dict:

@@ -39,13 +39,16 @@ import numpy as np
 import trimesh
 from tqdm.auto import tqdm
 
-from ..core.choices import EXPORT_PER, WEAVE_RESOLVE, check_choice
+from ..core.choices import EXPORT_PER, MESH_FORMATS, WEAVE_RESOLVE, check_choice
 from ..core.errors import WeaveError
+from ..core.files import atomic_directory
 from ..core.validate import show
 from ..scene.scene import Scene
 from .binders import binder_curvature_along, smallest_bend_radius_mm
 from .distort import Distortion, layer_shift, yarn_draws, yarn_rng
 from .export import (
+    GENERATOR,
+    REPORT_NAME,
     Part,
     material_entry,
     merge_meshes,
@@ -383,8 +386,23 @@ class Sample:
         return scene
 
     def export(self, directory, *, materials=None, per: str = "family", fmt: str = "stl",
-               resolve: str = "priority", progress: bool = False) -> dict:
+               resolve: str = "priority", progress: bool = False, overwrite: bool = False) -> dict:
         """Write the meshes and ``report.json`` into ``directory``; returns the report (docs/weave.md).
+
+        The directory is built beside ``directory`` and moved into place whole
+        (:func:`~xrayraster.core.files.atomic_directory`; ``report.json`` records the names written):
+        an existing ``directory`` is replaced only if it holds nothing but an earlier export, else
+        :class:`~xrayraster.ConfigError` before any work; ``overwrite=True`` then replaces the earlier
+        export's files and keeps every other entry. The files are :meth:`write_export`'s.
+        """
+        check_choice(fmt, MESH_FORMATS, "format", WeaveError)
+        with atomic_directory(directory, marker=REPORT_NAME, generator=GENERATOR, overwrite=overwrite) as tmp:
+            return self.write_export(tmp, materials=materials, per=per, fmt=fmt, resolve=resolve, progress=progress)
+
+    def write_export(self, directory, *, materials=None, per: str = "family", fmt: str = "stl",
+                     resolve: str = "priority", progress: bool = False) -> dict:
+        """Write the meshes and ``report.json`` into ``directory``, a new directory the caller owns
+        (:meth:`export` makes one safely); returns the report.
 
         One ``<part>.<fmt>`` file per :meth:`parts` entry (``fmt`` "stl" or "ply"), each written
         atomically. The report gives the cell, tiling, resolution, seed and distortion; yarn counts;
