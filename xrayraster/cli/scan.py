@@ -20,6 +20,8 @@ def add_parser(subparsers) -> None:
                         help="output directory (replaced only if it holds an earlier xrayraster scan output)")
     parser.add_argument("--save-projections", action="store_true",
                         help="also write the projections (line integrals) as DIR/projections.tif")
+    parser.add_argument("--allow-starved", action="store_true",
+                        help="scan even when over half the pixels the sample covers detect no photon (docs/scan.md)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument("-v", "--verbose", action="store_true")
     parser.set_defaults(run=run)
@@ -28,7 +30,8 @@ def add_parser(subparsers) -> None:
 def run(args) -> int:
     loaded = load_scan_file(args.scan)
     with atomic_directory(args.out, replaceable=is_scan_output) as tmp:
-        result = scan(loaded, progress=not args.quiet, keep_projections=args.save_projections)
+        result = scan(loaded, progress=not args.quiet, keep_projections=args.save_projections,
+                      allow_starved=args.allow_starved)
         result.save(tmp)
     meta = result.metadata
     stages = ", ".join(f"{stage} {s:.2f}" for stage, s in meta["seconds"].items())
