@@ -137,7 +137,7 @@ def _open_mesh(folder: Path) -> str:
 
 
 BAD = {
-    "missing scene file": (None, ["--views", "0"], r"missing\.toml: no such scene file"),
+    "missing scene file": (None, ["--views", "0"], r"scene file .*missing\.toml: no such file"),
     "unknown key": (GEOMETRY + '[[objects]]\nmesh = { box = [1, 1, 1] }\nmaterial = "a"\ncolour = "red"\n', [],
                     r"\[\[objects\]\] #1: unknown key\(s\) colour"),
     "view out of range": (EXAMPLE, ["--views", "4"], r"--views \[4\] out of range: the scene has 4 views"),

@@ -498,7 +498,7 @@ PHYSICS_ERRORS = {
     "mono without photons": (CONE + "[source]\nmonochromatic_kev = 60\n" + BOX, SRC_AT + r": missing 'photons_per_mm2_at_1m'"),
     "mono out of range": (CONE + "[source]\nmonochromatic_kev = 1000\nphotons_per_mm2_at_1m = 1\n" + BOX,
                           SRC_AT + r": monochromatic_kev must be in \[0\.1, 800\] keV"),
-    "missing spectrum file": (CONE + '[source]\nspectrum_file = "nope.txt"\n' + BOX, SRC_AT + r": spectrum file '.*nope\.txt' cannot be read"),
+    "missing spectrum file": (CONE + '[source]\nspectrum_file = "nope.txt"\n' + BOX, SRC_AT + r": spectrum file .*nope\.txt: no such file"),
     "detector unknown key": (CONE + "[detector]\nnoise = 1\n" + BOX, DET_AT + r": unknown key\(s\) noise; allowed: blur_sigma_px, dark, "),
     "detector mode": (CONE + '[detector]\nmode = "photon"\n' + BOX, DET_AT + r": mode must be 'integrating' or 'counting', got 'photon'"),
     "scintillator undefined": (CONE + '[detector]\nscintillator = "lyso"\nscintillator_mm = 1\n' + BOX,

@@ -181,7 +181,7 @@ def _open_box(path: Path) -> None:
     ("open", r"open edges|not closed|watertight"),
     ("nan", r"NaN or infinite"),
     ("junk", r"cannot read|mesh"),
-    ("missing", r"does not exist"),
+    ("missing", r"no such file"),
 ])
 def test_mesh_errors_name_the_scene_file_the_entry_and_the_mesh_file(tmp_path, kind, match):
     mesh = tmp_path / f"{kind}.obj"

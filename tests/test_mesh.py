@@ -145,7 +145,7 @@ def test_malformed_input_names_object(source):
 
 
 def test_missing_file_names_object(tmp_path):
-    with pytest.raises(MeshError, match=r"'ghost'.*does not exist"):
+    with pytest.raises(MeshError, match=r"'ghost'.*no such file"):
         load_mesh(tmp_path / "nope.stl", name="ghost")
 
 

@@ -225,7 +225,7 @@ def test_bad_files(tmp_path, content, match):
 
 
 def test_missing_file(tmp_path):
-    with pytest.raises(SpectrumError, match="cannot be read"):
+    with pytest.raises(SpectrumError, match="absent.txt: no such file"):
         Spectrum.from_file(tmp_path / "absent.txt")
 
 

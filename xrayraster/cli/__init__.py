@@ -11,9 +11,10 @@ import argparse
 import logging
 import sys
 import traceback
+import warnings
 
 from .. import __version__
-from ..core.errors import XrayrasterError
+from ..core.errors import XrayrasterError, XrayrasterWarning
 from . import compare, reconstruct, render, scan, voxelize, weave
 
 EXIT_OK, EXIT_UNEXPECTED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
@@ -37,7 +38,10 @@ def main(argv=None) -> int:
         return EXIT_INTERRUPTED
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(message)s")
     try:
-        return args.run(args)
+        with warnings.catch_warnings():  # restores showwarning for a caller of main (tests)
+            warnings.showwarning = _show_warning
+            warnings.simplefilter("always", XrayrasterWarning)  # each run says it, not only a process's first
+            return args.run(args)
     except XrayrasterError as exc:
         print(f"xrayraster: error: {one_line(exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT
@@ -57,3 +61,11 @@ def main(argv=None) -> int:
         print(f"xrayraster: unexpected error (a bug, please report it): {type(exc).__name__}: {one_line(exc)}{hint}",
               file=sys.stderr)
         return EXIT_UNEXPECTED
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """xrayraster's own warnings as one line on stderr, like its errors; others as Python prints them."""
+    if issubclass(category, XrayrasterWarning):
+        print(f"xrayraster: warning: {one_line(message)}", file=sys.stderr)
+    else:
+        sys.stderr.write(warnings.formatwarning(message, category, filename, lineno, line))

@@ -16,7 +16,7 @@ import numpy as np
 from .. import __version__
 from ..core.errors import ConfigError
 from ..core.files import atomic_write_text
-from ..io.tiff import read_tiff
+from ..core.inputs import read_tiff_file
 from ..pipeline.compare import MAX_BINS, compare, label_mask, write_histogram_png
 from .options import nonnegative_int, positive_int
 from .outputs import check_outputs
@@ -98,12 +98,7 @@ def _check_suffix(path: Path | None, default_name: str, flag: str) -> None:
 
 
 def _read_tiff(path: Path, what: str) -> tuple[np.ndarray, dict]:
-    if not path.is_file():
-        raise ConfigError(f"{what} {path}: no such file; give the path of a TIFF")
-    try:
-        data, info = read_tiff(path)
-    except ValueError as exc:  # tifffile's TiffFileError: not a TIFF
-        raise ConfigError(f"{what} {path} cannot be read as a TIFF ({exc}); give a TIFF volume") from None
+    data, info = read_tiff_file(path, what)
     if data.ndim != 3:
         raise ConfigError(f"{what} {path} holds an array of shape {data.shape}; give a volume (z, y, x)")
     return data, info

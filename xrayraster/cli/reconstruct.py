@@ -13,8 +13,8 @@ import numpy as np
 from ..core.choices import FILTERS, RECONSTRUCTION_INPUTS, SCAN_KINDS
 from ..core.errors import ConfigError
 from ..core.geometry import geometry_from_dict
+from ..core.inputs import read_tiff_file
 from ..io.scan_file import read_scan_file
-from ..io.tiff import read_tiff
 from ..recon.fdk import fdk
 from ..recon.truncation import DEFAULT_WIDTH
 from .options import add_scan_file
@@ -126,10 +126,7 @@ def choose_geometry(args, scan_geometry, info):
 def run(args) -> int:
     check_outputs([args.out, quicklook_path(args.out)], [args.projections, args.scan_file])
     scan_geometry, volume = read_scan_file(args.scan_file)
-    try:
-        stack, info = read_tiff(args.projections)  # info {}: from elsewhere, the scan file gives the geometry
-    except (OSError, ValueError) as exc:
-        raise ConfigError(f"{args.projections}: cannot read a TIFF stack ({exc})") from None
+    stack, info = read_tiff_file(args.projections, "projections")  # info {}: from elsewhere, the scan file gives the geometry
     if info.get("quantity") == "path length":
         raise ConfigError(f"{args.projections} holds path lengths per material; reconstruct radiographs "
                           "(xrayraster render without --path-lengths)")

@@ -11,6 +11,7 @@ from ..core.errors import ConfigError
 from ..core.projections import Projections
 from ..io.scene_file import load_scene_file
 from ..physics.detector import Detector
+from ..physics.starvation import starved_share, warn_if_starved
 from ..simulate.renderer import Renderer
 from .options import nonnegative_int, positive_int
 from .outputs import check_outputs, quicklook_path
@@ -91,6 +92,7 @@ def _render_radiographs(args) -> int:
     stack, units, facts = projections.data, projections.unit, projections.provenance
     starved, method, driver = facts["starved_pixels"], facts["method"], facts["renderer"]
     out = _with_scene_file(projections, args.scene).save(args.out)
+    warn_if_starved(starved_share(facts["starved_covered_pixels"], facts["covered_pixels"]), str(args.scene))
     png = quicklook_path(out)
     extras = []
     if args.noise:

@@ -22,6 +22,8 @@ def add_parser(subparsers) -> None:
                         help="replace an earlier scan's files in DIR although DIR holds other files (those are kept)")
     parser.add_argument("--save-projections", action="store_true",
                         help="also write the projections (line integrals) as DIR/projections.tif")
+    parser.add_argument("--allow-starved", action="store_true",
+                        help="scan even when over half the pixels the sample covers detect no photon (docs/scan.md)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument("-v", "--verbose", action="store_true")
     parser.set_defaults(run=run)
@@ -30,7 +32,8 @@ def add_parser(subparsers) -> None:
 def run(args) -> int:
     loaded = load_scan_file(args.scan)
     check_scan_output(args.out, overwrite=args.force, projections=args.save_projections)
-    result = scan(loaded, progress=not args.quiet, keep_projections=args.save_projections)
+    result = scan(loaded, progress=not args.quiet, keep_projections=args.save_projections,
+                  allow_starved=args.allow_starved)
     result.save(args.out, overwrite=args.force)
     meta = result.metadata
     stages = ", ".join(f"{stage} {s:.2f}" for stage, s in meta["seconds"].items())

@@ -41,6 +41,10 @@ class PhysicsError(XrayrasterError, ValueError):
     """A physics request cannot be met; the message names the field and the fix."""
 
 
+class StarvationError(PhysicsError):
+    """Over half the pixels the sample covers detected no photon: the scan would be noise (physics/starvation.py)."""
+
+
 class RenderError(XrayrasterError, ValueError):
     """A render request cannot be met; the message names the problem and the fix."""
 
@@ -67,3 +71,12 @@ class GLContextError(XrayrasterError, RuntimeError):
 
 class OpenCLError(XrayrasterError, RuntimeError):
     """No usable OpenCL device; the message says what to install or choose."""
+
+
+class XrayrasterWarning(UserWarning):
+    """A result xrayraster made but whose quality is in doubt; the message says why and the fix.
+    The command line prints each as one line on stderr."""
+
+
+class StarvationWarning(XrayrasterWarning):
+    """Over 1 % of the pixels the sample covers detected no photon (physics/starvation.py)."""

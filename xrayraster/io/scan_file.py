@@ -22,6 +22,7 @@ from pathlib import Path
 
 from ..core.errors import ConfigError
 from ..core.geometry import geometry_from_dict
+from ..core.inputs import read_text_file
 from ..core.volume import VolumeGeometry
 
 _OLDER_SPELLINGS = {"views": "num_views", "start_deg": "start_angle_deg"}
@@ -30,11 +31,10 @@ _OLDER_SPELLINGS = {"views": "num_views", "start_deg": "start_angle_deg"}
 def read_scan_file(path) -> tuple[object | None, VolumeGeometry]:
     """(scan geometry or None, volume geometry) from a JSON scan file (module docstring)."""
     path = Path(path)
+    text = read_text_file(path, "scan file")  # UTF-8, a byte-order mark allowed
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise ConfigError(f"scan file {str(path)!r} cannot be read: {exc.strerror or exc}") from None
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
         raise ConfigError(f"scan file {str(path)!r} is not valid JSON: {exc}") from None
     if not isinstance(data, dict) or "volume" not in data:
         raise ConfigError(f"scan file {str(path)!r}: needs a 'volume' object (shape, voxel_size) and usually 'geometry'")

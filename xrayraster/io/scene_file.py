@@ -27,6 +27,7 @@ from ..core.errors import (
     SpectrumError,
 )
 from ..core.geometry import ConeBeamGeometry, ParallelBeamGeometry, geometry_from_dict
+from ..core.inputs import read_text_file
 from ..core.transform import Transform
 from ..physics.detector import Detector
 from ..physics.realism import Realism
@@ -71,11 +72,11 @@ _MAX_SECTIONS = 10_000
 
 
 def read_toml(path: Path, kind: str) -> dict:
-    """The tables of the TOML file ``path``; a missing file or bad TOML is a ConfigError naming it."""
+    """The tables of the TOML file ``path`` (UTF-8, a byte-order mark allowed); a file that cannot be
+    read as text (:func:`~xrayraster.core.inputs.read_text_file`) or bad TOML is a ConfigError naming it."""
+    text = read_text_file(path, kind)
     try:
-        return tomllib.loads(path.read_text())
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: no such {kind}") from None
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from None
 

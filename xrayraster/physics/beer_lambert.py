@@ -222,6 +222,7 @@ class Normalised:
     transmission: np.ndarray  # (raw − dark) / (flat − dark), starved pixels clamped
     line_integral: np.ndarray  # −ln(transmission)
     starved: int  # pixels whose raw − dark was ≤ 0 (clamped before −log)
+    starved_mask: np.ndarray  # bool (rows, cols): those pixels
 
 
 def normalise(raw: np.ndarray, flat, dark, floor) -> Normalised:
@@ -239,7 +240,8 @@ def normalise(raw: np.ndarray, flat, dark, floor) -> Normalised:
     starved = signal <= 0
     signal = np.where(starved, floor, signal)
     transmission = signal / (flat - dark)
-    return Normalised(raw=raw, transmission=transmission, line_integral=-np.log(transmission), starved=int(starved.sum()))
+    return Normalised(raw=raw, transmission=transmission, line_integral=-np.log(transmission), starved=int(starved.sum()),
+                      starved_mask=starved)
 
 
 def _check(lengths, mu, photons):

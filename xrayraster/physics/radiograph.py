@@ -28,6 +28,8 @@ class Radiograph:
     starved: int  # photon-starved pixels: clamped before −log, or a transmission that is 0 in float32; 0 for raw output
     bins: int  # energy bins used
     dropped: float  # share of the open-beam signal in the bins dropped (0 when none were)
+    covered: int  # pixels whose ray crosses the scene (a non-zero path length): the sample's share of the view
+    starved_covered: int  # the starved pixels among them (physics/starvation.py)
 
 
 def attenuation_table(materials, energies_kev) -> np.ndarray:
@@ -105,8 +107,11 @@ def radiograph(lengths, materials, spectrum, detector: Detector, factor, *, outp
     quantum = _detected(lengths, mu, photons, energies, detector, factor, focal_sigma_px, rng if noise else None,
                         threads, model.table)
     raw = detector.read_out(quantum, rng if noise else None, gain=gain)
+    # The path lengths are at hand, so the pixels the scene covers are counted here, per view, for
+    # the share of them that starve (a grazing ray's tiny path counts: it is still the sample's).
+    covered = np.any(np.asarray(lengths) != 0, axis=0)
     if output == "raw":
-        return Radiograph(raw.astype(np.float32), output, 0, len(energies), dropped)
+        return Radiograph(raw.astype(np.float32), output, 0, len(energies), dropped, int(covered.sum()), 0)
     flat = _exact_flat(photons, energies, detector, factor, raw.shape, focal_sigma_px)
     if flat_noise is not None:
         flat = detector.dark + (flat - detector.dark) * flat_noise
@@ -114,13 +119,13 @@ def radiograph(lengths, materials, spectrum, detector: Detector, factor, *, outp
     floor = 0.5 * float((photons * weights).sum() / photons.sum())  # half a mean detected photon
     normalised = beer_lambert.normalise(raw, flat, detector.dark, floor)
     image = (normalised.transmission if output == "transmission" else normalised.line_integral).astype(np.float32)
-    starved = normalised.starved
+    starved = normalised.starved_mask
     if output == "transmission":
         # A transmission below float32's smallest subnormal (~1.4e-45) is stored as 0: as
         # photon-starved as a clamped pixel (its −log is infinite), so it is counted with them.
-        clamped = np.asarray(raw, dtype=np.float64) - detector.dark <= 0  # counted by normalise already
-        starved += int(np.count_nonzero((image == 0) & ~clamped))
-    return Radiograph(image, output, starved, len(energies), dropped)
+        starved = starved | (image == 0)
+    return Radiograph(image, output, int(starved.sum()), len(energies), dropped, int(covered.sum()),
+                      int(np.count_nonzero(starved & covered)))
 
 
 def flat_noise(spectrum, detector: Detector, factor, shape: tuple[int, int], frames: int, rng, *,

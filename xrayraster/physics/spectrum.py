@@ -33,6 +33,7 @@ import numpy as np
 
 from ..core.errors import SpectrumError
 from ..core.files import atomic_write_text
+from ..core.inputs import read_text_file
 
 __all__ = ["REFERENCE_DISTANCE_MM", "SPEKPY_ANODES", "Spectrum", "SpectrumError"]
 
@@ -136,12 +137,7 @@ class Spectrum:
         the rest of a line); blank lines are skipped. Errors name the file and line number.
         """
         path = Path(path)
-        try:
-            text = path.read_text(encoding="utf-8")
-        except OSError as exc:
-            raise SpectrumError(f"spectrum file {str(path)!r} cannot be read: {exc.strerror or exc}") from None
-        except UnicodeDecodeError:
-            raise SpectrumError(f"spectrum file {str(path)!r} is not UTF-8 text: give a two-column text file") from None
+        text = read_text_file(path, "spectrum file", SpectrumError)
         energies: list[float] = []
         photons: list[float] = []
         for number, raw in enumerate(text.splitlines(), start=1):

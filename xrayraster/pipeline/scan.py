@@ -24,6 +24,7 @@ from ..core.provenance import package_version
 from ..core.tiff import png_text, quicklook_factor, quicklook_path
 from ..gl.voxelize import LabelVolume, voxelize
 from ..physics.detector import Detector
+from ..physics.starvation import refuse_if_starved, starved_share, warn_if_starved
 from ..recon.fdk import FDKStream, Volume
 from ..recon.opencl import CLContext
 from ..simulate.renderer import Renderer
@@ -48,7 +49,7 @@ STAGES = ("sample", "projections", "fdk", "labels")
 RECONSTRUCTION_FACTS = ("method", "filter", "scan", "displaced", "truncation", "truncation_width",
                         "truncation_corrected_row_ends")
 # Per-view lists of Renderer.project_all's provenance, joined across batches.
-_PER_VIEW = ("views", "bins_used", "dropped_signal_share", "starved_pixels")
+_PER_VIEW = ("views", "bins_used", "dropped_signal_share", "starved_pixels", "covered_pixels", "starved_covered_pixels")
 
 
 @dataclass(frozen=True)
@@ -93,13 +94,19 @@ def check_scan_output(directory, *, overwrite: bool = False, projections: bool =
                                   names=output_names(projections))
 
 
-def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False) -> ScanResult:
+def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False, allow_starved: bool = False) -> ScanResult:
     """Run the scan of a :class:`~xrayraster.pipeline.ScanFile` (or a scan file's path, loaded and
     checked first): sample → ``Renderer.project_all`` (line integrals of the sample and its mount,
     noise and realism as the file says) in batches, each fed to ``xr.FDKStream`` on the file's grid
     → ``xr.voxelize`` of the sample on the same grid. ``progress``: a bar with ETA for the
     projections (True), a callable ``progress(done, total)``, or nothing (False).
-    ``keep_projections``: return the projections too (otherwise each batch is freed once filtered)."""
+    ``keep_projections``: return the projections too (otherwise each batch is freed once filtered).
+
+    Photon starvation (:mod:`~xrayraster.physics.starvation`): after every batch, the share of the
+    pixels the sample covers that detected no photon, over the views so far; over half is a
+    :class:`~xrayraster.core.errors.StarvationError` at once (after the first batch when the
+    exposure is that low) unless ``allow_starved``, and over 1 % at the end a ``StarvationWarning``.
+    ``metadata["projections"]["starved_share"]`` records it."""
     loaded = scan_file_or_path if isinstance(scan_file_or_path, ScanFile) else load_scan_file(scan_file_or_path)
     options = loaded.options
     seconds = dict.fromkeys(STAGES, 0.0)  # projections and fdk take turns, so each is a sum
@@ -113,13 +120,16 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False) -
             stream = FDKStream(loaded.geometry, loaded.volume, filter=options.filter, truncation=options.truncation,
                                truncation_width=options.truncation_width, context=cl, batch_views=BATCH_VIEWS)
         with stream:
-            provenances, stacks = _project_into(stream, renderer, scene, loaded, seconds, progress, keep_projections)
+            provenances, stacks = _project_into(stream, renderer, scene, loaded, seconds, progress, keep_projections,
+                                                allow_starved)
             with _timed(seconds, "fdk"):
                 volume = stream.result()
         with _timed(seconds, "labels"):
             labels = voxelize(scene, loaded.volume, context=renderer.gl)
         devices = {"gl_renderer": renderer.gl.renderer, "opencl_device": str(cl.info)}
     provenance = _joined(provenances)
+    starved = starved_share(provenance["starved_covered_pixels"], provenance["covered_pixels"])
+    warn_if_starved(starved, str(loaded.path))
     projections = (Projections(np.concatenate(stacks), loaded.geometry, "lineint", "1", provenance)
                    if keep_projections else None)
 
@@ -139,6 +149,9 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False) -
         "projections": {"batch_views": stream.batch_views, "bins_used": max(provenance["bins_used"]),
                         "dropped_signal_share": max(provenance["dropped_signal_share"]),
                         "starved_pixels": sum(provenance["starved_pixels"]),
+                        "covered_pixels": sum(provenance["covered_pixels"]),
+                        "starved_covered_pixels": sum(provenance["starved_covered_pixels"]),
+                        "starved_share": starved,
                         "spectral_table": provenance.get("spectral_table")},
         "reconstruction": {key: volume.provenance[key] for key in RECONSTRUCTION_FACTS},
         "realism": loaded.realism.to_dict(),
@@ -155,10 +168,12 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False) -
 
 
 def _project_into(stream: FDKStream, renderer: Renderer, scene, loaded: ScanFile, seconds: dict, progress,
-                  keep: bool) -> tuple[list[dict], list[np.ndarray]]:
+                  keep: bool, allow_starved: bool) -> tuple[list[dict], list[np.ndarray]]:
     """Render the views of the sample and its mount batch by batch into ``stream``, timing the two
-    stages apart; noisy views interpolate their spectral sums (``Renderer.project``). Returns the
-    batches' provenance and, if ``keep``, their line integrals (else they are dropped at once)."""
+    stages apart; noisy views interpolate their spectral sums (``Renderer.project``). A batch that
+    leaves the views so far starved over the refusal share stops the scan before its backprojection
+    unless ``allow_starved``. Returns the batches' provenance and, if ``keep``, their line integrals
+    (else they are dropped at once)."""
     scanned = loaded.with_mount(scene)
     total = loaded.geometry.num_views
     report, bar = _progress(progress, total)
@@ -171,9 +186,13 @@ def _project_into(stream: FDKStream, renderer: Renderer, scene, loaded: ScanFile
                                              noise=loaded.options.noise, seed=loaded.options.seed,
                                              realism=loaded.realism, spectral_table=True,
                                              progress=lambda done, _, first=first: report(first + done, total))
+            provenances.append(batch.provenance)
+            if not allow_starved:
+                so_far = _joined(provenances)
+                refuse_if_starved(starved_share(so_far["starved_covered_pixels"], so_far["covered_pixels"]),
+                                  str(loaded.path), views[-1] + 1)
             with _timed(seconds, "fdk"):
                 stream.add(first, batch.data)
-            provenances.append(batch.provenance)
             if keep:
                 stacks.append(batch.data)
     finally:

@@ -16,6 +16,7 @@ from functools import cached_property
 import numpy as np
 
 from ..core.errors import MeshError
+from ..core.inputs import check_input_file
 from ..core.transform import Transform
 
 
@@ -83,12 +84,14 @@ def _read(source, name: str) -> tuple[np.ndarray, np.ndarray]:
     if isinstance(source, (str, os.PathLike)):
         import trimesh
 
-        if not os.path.exists(source):
-            raise MeshError(f"object {name!r}: mesh file {os.fspath(source)!r} does not exist")
+        check_input_file(source, f"object {name!r}: mesh file", MeshError)
         try:
             loaded = trimesh.load(source, force="mesh", process=False)
         except Exception as exc:  # trimesh raises many types for unreadable files
             raise MeshError(f"object {name!r}: cannot read mesh file {os.fspath(source)!r}: {exc}") from exc
+        if len(loaded.faces) == 0:  # trimesh reads bytes that are no mesh (or text in another format) as empty
+            raise MeshError(f"object {name!r}: mesh file {os.fspath(source)!r}: no triangles read; "
+                            "give an STL, OBJ or PLY mesh")
         source = loaded
     if hasattr(source, "vertices") and hasattr(source, "faces"):
         vertices, faces = source.vertices, source.faces

@@ -124,7 +124,8 @@ class Renderer(PathLengthRenderer):
         (same options; noise streams are seeded per view index, so a subset gives the same bytes
         as the full run). Unit: ``"1"`` for lineint and transmission; raw is ``"counts"`` for a
         counting detector, else ``"keV deposited"``. The provenance records the views, materials,
-        spectrum, detector, seed and per-view bins, dropped signal and starved pixels, as the
+        spectrum, detector, seed and per-view bins, dropped signal, starved pixels, the pixels the
+        scene covers and the starved ones among them (physics/starvation.py), as the
         command line writes them, the realism options when any is on, and the spectral table's grid
         and measured error when one was used. ``progress`` as in :meth:`path_lengths_all`.
         """
@@ -150,6 +151,8 @@ class Renderer(PathLengthRenderer):
             "bins_used": [shot.bins for shot in shots],
             "dropped_signal_share": [shot.dropped for shot in shots],
             "starved_pixels": [shot.starved for shot in shots],
+            "covered_pixels": [shot.covered for shot in shots],
+            "starved_covered_pixels": [shot.starved_covered for shot in shots],
             "noise": bool(noise),
             "seed": seed,
             "supersampling": self.supersampling,
