@@ -9,93 +9,37 @@ reconstructed volumes, as CT tools report it (``Volume.data`` with ``Volume.unit
 1 mm⁻¹ = 10 cm⁻¹). Mass attenuation μ/ρ is cm²/g and density g/cm³, as the tables give them.
 """
 
-# xr.weave.UnitCell, xr.weave.Sample: woven samples (needs no OpenGL)
-from . import weave
-from .core.errors import (
-    CompareError,
-    ConfigError,
-    GeometryError,
-    GLContextError,
-    MaterialError,
-    MeshError,
-    OpenCLError,
-    PhysicsError,
-    ReconstructionError,
-    RenderError,
-    SceneError,
-    SpectrumError,
-    VoxelizeError,
-    WeaveError,
-    XrayrasterError,
-)
-from .core.geometry import (
-    ConeBeamGeometry,
-    ParallelBeamGeometry,
-    VectorGeometry,
-    full_circle,
-)
-from .core.projections import Projections
-from .core.transform import Transform
-from .core.volume import VolumeGeometry
-from .gl.context import GLContext
-from .gl.voxelize import LabelVolume, voxelize
-from .physics.detector import Detector
-from .physics.radiograph import Radiograph
-from .physics.realism import Realism
-from .physics.spectrum import Spectrum
-from .pipeline import Comparison, ScanResult, compare, scan
-from .recon.fdk import FDKStream, Volume, fdk
-from .recon.opencl import CLContext
-from .scene.materials import Material
-from .scene.mesh import Mesh, load_mesh
-from .scene.scene import Scene, SceneObject
-from .simulate.renderer import Renderer
+from . import weave  # xr.weave.UnitCell, xr.weave.Sample: woven samples (its names load on first use)
+from .core.lazy import lazy_names
 
 __version__ = "0.1.0"
 
-__all__ = [
-    "CLContext",
-    "CompareError",
-    "Comparison",
-    "ConeBeamGeometry",
-    "ConfigError",
-    "Detector",
-    "FDKStream",
-    "GLContext",
-    "GLContextError",
-    "GeometryError",
-    "LabelVolume",
-    "Material",
-    "MaterialError",
-    "Mesh",
-    "MeshError",
-    "OpenCLError",
-    "ParallelBeamGeometry",
-    "PhysicsError",
-    "Projections",
-    "Radiograph",
-    "Realism",
-    "ReconstructionError",
-    "RenderError",
-    "Renderer",
-    "ScanResult",
-    "Scene",
-    "SceneError",
-    "SceneObject",
-    "Spectrum",
-    "SpectrumError",
-    "Transform",
-    "VectorGeometry",
-    "Volume",
-    "VoxelizeError",
-    "VolumeGeometry",
-    "WeaveError",
-    "XrayrasterError",
-    "compare",
-    "fdk",
-    "full_circle",
-    "load_mesh",
-    "scan",
-    "voxelize",
-    "weave",
-]
+# Where each public name lives; imported on first use (core/lazy.py), so `import xrayraster` and
+# the command line start in milliseconds. The stage subpackages below may reorganise.
+_HOMES = {
+    ".core.errors": (
+        "CompareError", "ConfigError", "GLContextError", "GeometryError", "MaterialError", "MeshError", "OpenCLError",
+        "PhysicsError", "ReconstructionError", "RenderError", "SceneError", "SpectrumError", "VoxelizeError",
+        "WeaveError", "XrayrasterError",
+    ),
+    ".core.geometry": ("ConeBeamGeometry", "ParallelBeamGeometry", "VectorGeometry", "full_circle"),
+    ".core.projections": ("Projections",),
+    ".core.transform": ("Transform",),
+    ".core.volume": ("VolumeGeometry",),
+    ".gl.context": ("GLContext",),
+    ".gl.voxelize": ("LabelVolume", "voxelize"),
+    ".physics.detector": ("Detector",),
+    ".physics.radiograph": ("Radiograph",),
+    ".physics.realism": ("Realism",),
+    ".physics.spectrum": ("Spectrum",),
+    ".pipeline": ("Comparison", "ScanResult", "compare", "scan"),
+    ".recon.fdk": ("FDKStream", "Volume", "fdk"),
+    ".recon.opencl": ("CLContext",),
+    ".scene.materials": ("Material",),
+    ".scene.mesh": ("Mesh", "load_mesh"),
+    ".scene.scene": ("Scene", "SceneObject"),
+    ".simulate.renderer": ("Renderer",),
+}
+__getattr__, __dir__ = lazy_names(globals(), _HOMES)
+__all__ = sorted([*(name for names in _HOMES.values() for name in names), "weave"])
+
