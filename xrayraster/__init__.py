@@ -9,7 +9,9 @@ reconstructed volumes, as CT tools report it (``Volume.data`` with ``Volume.unit
 1 mm⁻¹ = 10 cm⁻¹). Mass attenuation μ/ρ is cm²/g and density g/cm³, as the tables give them.
 """
 
-from . import weave  # xr.weave.UnitCell, xr.weave.Sample: woven samples (its names load on first use)
+import types
+
+from . import weave  # xr.weave.UnitCell, xr.weave.Sample, and callable: _CallableModule below
 from .core.lazy import lazy_names
 
 __version__ = "0.1.0"
@@ -32,7 +34,7 @@ _HOMES = {
     ".physics.radiograph": ("Radiograph",),
     ".physics.realism": ("Realism",),
     ".physics.spectrum": ("Spectrum",),
-    ".pipeline": ("Comparison", "ScanResult", "compare", "scan"),
+    ".pipeline": ("Comparison", "ScanResult", "WeaveResult", "compare", "scan"),
     ".recon.fdk": ("FDKStream", "Volume", "fdk"),
     ".recon.opencl": ("CLContext",),
     ".scene.materials": ("Material",),
@@ -43,3 +45,22 @@ _HOMES = {
 __getattr__, __dir__ = lazy_names(globals(), _HOMES)
 __all__ = sorted([*(name for names in _HOMES.values() for name in names), "weave"])
 
+
+class _CallableModule(types.ModuleType):
+    """``xrayraster.weave``, callable: ``xr.weave(path)`` makes a sample as ``xrayraster weave`` does.
+
+    ``xr.weave`` is both the subpackage (``xr.weave.UnitCell``, ``xr.weave.Sample``: docs/weave.md)
+    and the one-call pipeline beside ``xr.scan``. A module cannot be called, so its class is made
+    this subclass. It is done here: the weave layer may not import the pipeline above it, and this
+    module runs before the subpackage whichever is imported first (``import xrayraster.weave``
+    imports its parent first), so ``xr.weave`` is always callable.
+    """
+
+    def __call__(self, source, **options):
+        """:func:`xrayraster.pipeline.woven.weave`: a weave file (path or table) → ``xr.WeaveResult``."""
+        from .pipeline.woven import weave as run
+
+        return run(source, **options)
+
+
+weave.__class__ = _CallableModule

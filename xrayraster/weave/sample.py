@@ -39,7 +39,7 @@ import numpy as np
 import trimesh
 from tqdm.auto import tqdm
 
-from ..core.choices import EXPORT_PER, WEAVE_RESOLVE, check_choice
+from ..core.choices import EXPORT_PER, MESH_FORMATS, WEAVE_RESOLVE, check_choice
 from ..core.errors import WeaveError
 from ..core.validate import show
 from ..scene.scene import Scene
@@ -51,6 +51,7 @@ from .export import (
     merge_meshes,
     mesh_bounds,
     occupied_volumes,
+    part_file,
     settle,
     write_parts,
     write_report,
@@ -387,16 +388,28 @@ class Sample:
         """Write the meshes and ``report.json`` into ``directory``; returns the report (docs/weave.md).
 
         One ``<part>.<fmt>`` file per :meth:`parts` entry (``fmt`` "stl" or "ply"), each written
-        atomically. The report gives the cell, tiling, resolution, seed and distortion; yarn counts;
-        every part's file, family, label, priority and material; the materials (density g/cm³, mass
+        atomically; what they hold is :meth:`exported`'s.
+        """
+        parts, report = self.exported(materials, per=per, fmt=fmt, resolve=resolve, progress=progress)
+        _stage(progress, f"writing {len(parts)} mesh files")
+        write_parts(parts, directory, fmt)
+        write_report(report, directory)
+        return report
+
+    def exported(self, materials=None, *, per: str = "family", fmt: str = "stl", resolve: str = "priority",
+                 progress: bool = False) -> tuple[list[Part], dict]:
+        """What :meth:`export` writes, in memory: the parts (one mesh file each) and the report.
+
+        The report gives the cell, tiling, resolution, seed and distortion; yarn counts; every
+        part's file, family, label, priority and material; the materials (density g/cm³, mass
         fractions); the box and the meshes' bounds (mm); each family's occupied volume (mm³) and
         fraction of the box (:func:`~xrayraster.weave.export.occupied_volumes`); and the
         interpenetration before and after resolving.
         """
+        check_choice(fmt, MESH_FORMATS, "format", WeaveError)
         start = time.perf_counter()
         parts, facts = self.parts(materials, per=per, resolve=resolve, progress=progress)
-        _stage(progress, f"writing {len(parts)} mesh files and measuring the families' volumes")
-        files = write_parts(parts, directory, fmt)
+        _stage(progress, "measuring the families' volumes")
         volumes = occupied_volumes(parts, PRIORITIES)
         lo, hi = self.box
         box_volume = float(np.prod(hi - lo))
@@ -409,7 +422,7 @@ class Sample:
             "resolve": resolve, "per": per, "format": fmt,
             "yarns": facts["yarns"],
             "triangles": int(sum(len(p.mesh.faces) for p in parts)),
-            "parts": [{"name": p.name, "file": files[p.name], "family": p.family, "label": p.label,
+            "parts": [{"name": p.name, "file": part_file(p.name, fmt), "family": p.family, "label": p.label,
                        "priority": p.priority, "material": key} for p, key in zip(parts, keys)],
             "materials": {key: material_entry(p.material) for p, key in zip(parts, keys)},
             "box_mm": [lo.tolist(), hi.tolist()],
@@ -419,8 +432,7 @@ class Sample:
             "interpenetration_mm3": facts["interpenetration_mm3"],
             "seconds": round(time.perf_counter() - start, 3),
         }
-        write_report(report, directory)
-        return report
+        return parts, report
 
     def _materials(self, materials) -> tuple[dict, dict]:
         """(family → Material, tracer yarn → (Material, label or None)), tracer names checked."""
