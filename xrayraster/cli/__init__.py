@@ -32,11 +32,11 @@ def one_line(text) -> str:
 def main(argv=None) -> int:
     interrupts.install()
     argv = sys.argv[1:] if argv is None else list(argv)
-    if argv == ["--version"]:
-        print(f"xrayraster {__version__}")
-        return EXIT_OK
     verbose = "-v" in argv or "--verbose" in argv  # for a failure before the arguments are parsed
     try:
+        if argv == ["--version"]:  # answered before the commands' second of imports
+            print(f"xrayraster {__version__}")
+            return EXIT_OK
         with interrupts.deferred():  # a library interrupted mid-import may swallow it, or crash
             from . import compare, reconstruct, render, scan, voxelize, weave
         parser = argparse.ArgumentParser(prog="xrayraster", description="X-ray CT simulation from triangle meshes.")
