@@ -80,11 +80,10 @@ def _snapshot(root: Path) -> dict:
 
 @pytest.fixture(scope="module")
 def made(gl, cl, tmp_path_factory):
-    """What the Python API writes: one small scan's result and a weave file (made once)."""
+    """What the Python API writes, made once: a weave file, a small scan's result and xr.weave's."""
     root = tmp_path_factory.mktemp("made")
     (root / "weave.toml").write_text(WEAVE)
-    result = xr.scan(SCAN)
-    return root, result
+    return root, xr.scan(SCAN), xr.weave(root / "weave.toml")
 
 
 @pytest.fixture
@@ -116,7 +115,7 @@ def _cli(argv, capsys) -> tuple[int, str]:
 
 @pytest.mark.parametrize("where", WHERE)
 def test_every_command_into_a_users_directory(made, user, where, capsys):
-    root, _ = made
+    root, *_ = made
     tmp, home, before = user
     target = _where(tmp, home, where)
     weave = str(root / "weave.toml")
@@ -165,7 +164,7 @@ def test_every_command_into_a_users_directory(made, user, where, capsys):
 
 @pytest.mark.parametrize("where", WHERE)
 def test_force_keeps_the_users_files_beside_a_replaced_output(made, user, where, capsys):
-    root, _ = made
+    root, *_ = made
     tmp, home, before = user
     out = _where(tmp, home, where) / "scan"
     assert _cli(["scan", str(SCAN), "-o", str(out), "--quiet"], capsys)[0] == 0
@@ -182,7 +181,7 @@ def test_force_keeps_the_users_files_beside_a_replaced_output(made, user, where,
 
 @pytest.mark.parametrize("where", WHERE)
 def test_every_save_and_export_into_a_users_directory(made, user, where):
-    root, result = made
+    root, result, woven = made
     tmp, home, before = user
     target = _where(tmp, home, where)
     sample = load_weave_file(root / "weave.toml")
@@ -196,6 +195,8 @@ def test_every_save_and_export_into_a_users_directory(made, user, where):
         lambda: result.labels.save(target / "radiograph.tif", quicklook=False),
         lambda: sample.sample.export(target, materials=sample.materials),
         lambda: sample.sample.export(target, materials=sample.materials, overwrite=True),  # matrix.stl
+        lambda: woven.save(target),
+        lambda: woven.save(target, overwrite=True),  # report.json, scene.toml ... are the user's
         lambda: write_histogram_png(target / "histograms.png", xr.compare(result.volume.data, result.volume.data)),
     ]
     for attempt in attempts:
@@ -208,11 +209,13 @@ def test_every_save_and_export_into_a_users_directory(made, user, where):
     result.volume.save(target / "fresh.tif")
     result.volume.save(target / "fresh.tif")  # its own earlier output
     sample.sample.export(target / "meshes", materials=sample.materials)
+    woven.save(target / "woven")
+    woven.save(target / "woven")  # its own earlier output
     _kept(home, before)
 
 
 def test_a_link_as_an_output_file_is_written_through_and_stays(made, tmp_path):
-    _, result = made
+    _, result, _ = made
     real = result.volume.save(tmp_path / "real.tif", quicklook=False)
     link = tmp_path / "link.tif"
     link.symlink_to(real)

@@ -6,6 +6,10 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
+import subprocess
+import sys
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +17,7 @@ import pytest
 import tifffile
 import trimesh
 
+import xrayraster as xr
 from references.solids import is_manifold
 from xrayraster import cli
 from xrayraster.io.scene_file import load_scene_file
@@ -184,6 +189,30 @@ def test_python_export_matches_the_command(exported, tmp_path):
     assert len(report["parts"]) == 1 + 16
     assert report["volume_mm3"] == pytest.approx(_report(exported / "out")["volume_mm3"], rel=1e-9)
     assert isinstance(loaded.sample, Sample) and isinstance(loaded.sample.cell, UnitCell)
+
+
+def test_xr_weave_saves_what_the_command_writes(exported, tmp_path):
+    result = xr.weave(tomllib.loads(WEAVE_TOML))  # the parsed table; a path works as well
+    result.save(tmp_path / "py")
+    command = exported / "out"
+    names = sorted(p.name for p in command.iterdir())
+    assert sorted(p.name for p in (tmp_path / "py").iterdir()) == names
+    for name in names:
+        if name == "report.json":  # the same but for the time taken
+            assert {**_report(tmp_path / "py"), "seconds": 0} == {**_report(command), "seconds": 0}
+        else:
+            assert (tmp_path / "py" / name).read_bytes() == (command / name).read_bytes(), name
+    loaded = load_scene_file(command / "scene.toml")
+    assert [o.label for o in result.scene.objects] == [o.label for o in loaded.scene.objects]
+
+
+def test_xr_weave_is_the_subpackage_too_whichever_is_imported_first():
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    code = ("import xrayraster.weave as w; import xrayraster as xr; "
+            "assert xr.weave is w and callable(w) and w.UnitCell().weft_layers > 0 and 'Sample' in dir(w)")
+    run = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60)
+    assert run.returncode == 0, run.stderr
+    assert isinstance(xr.weave.Sample, type) and xr.weave.UnitCell is UnitCell
 
 
 def test_bundled_weave_example_runs(tmp_path):

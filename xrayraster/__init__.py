@@ -9,99 +9,58 @@ reconstructed volumes, as CT tools report it (``Volume.data`` with ``Volume.unit
 1 mm⁻¹ = 10 cm⁻¹). Mass attenuation μ/ρ is cm²/g and density g/cm³, as the tables give them.
 """
 
-# xr.weave.UnitCell, xr.weave.Sample: woven samples (needs no OpenGL)
-from . import weave
-from .core.errors import (
-    CompareError,
-    ConfigError,
-    GeometryError,
-    GLContextError,
-    MaterialError,
-    MeshError,
-    OpenCLError,
-    PhysicsError,
-    ReconstructionError,
-    RenderError,
-    SceneError,
-    SpectrumError,
-    StarvationError,
-    StarvationWarning,
-    VoxelizeError,
-    WeaveError,
-    XrayrasterError,
-    XrayrasterWarning,
-)
-from .core.geometry import (
-    ConeBeamGeometry,
-    ParallelBeamGeometry,
-    VectorGeometry,
-    full_circle,
-)
-from .core.projections import Projections
-from .core.transform import Transform
-from .core.volume import VolumeGeometry
-from .gl.context import GLContext
-from .gl.voxelize import LabelVolume, voxelize
-from .physics.detector import Detector
-from .physics.radiograph import Radiograph
-from .physics.realism import Realism
-from .physics.spectrum import Spectrum
-from .pipeline import Comparison, ScanResult, compare, scan
-from .recon.fdk import FDKStream, Volume, fdk
-from .recon.opencl import CLContext
-from .scene.materials import Material
-from .scene.mesh import Mesh, load_mesh
-from .scene.scene import Scene, SceneObject
-from .simulate.renderer import Renderer
+import types
+
+from . import weave  # xr.weave.UnitCell, xr.weave.Sample, and callable: _CallableModule below
+from .core.lazy import lazy_names
 
 __version__ = "0.1.0"
 
-__all__ = [
-    "CLContext",
-    "CompareError",
-    "Comparison",
-    "ConeBeamGeometry",
-    "ConfigError",
-    "Detector",
-    "FDKStream",
-    "GLContext",
-    "GLContextError",
-    "GeometryError",
-    "LabelVolume",
-    "Material",
-    "MaterialError",
-    "Mesh",
-    "MeshError",
-    "OpenCLError",
-    "ParallelBeamGeometry",
-    "PhysicsError",
-    "Projections",
-    "Radiograph",
-    "Realism",
-    "ReconstructionError",
-    "RenderError",
-    "Renderer",
-    "ScanResult",
-    "Scene",
-    "SceneError",
-    "SceneObject",
-    "Spectrum",
-    "SpectrumError",
-    "StarvationError",
-    "StarvationWarning",
-    "Transform",
-    "VectorGeometry",
-    "Volume",
-    "VoxelizeError",
-    "VolumeGeometry",
-    "WeaveError",
-    "XrayrasterError",
-    "XrayrasterWarning",
-    "compare",
-    "fdk",
-    "full_circle",
-    "load_mesh",
-    "scan",
-    "voxelize",
-    "weave",
-]
+# Where each public name lives; imported on first use (core/lazy.py), so `import xrayraster` and
+# the command line start in milliseconds. The stage subpackages below may reorganise.
+_HOMES = {
+    ".core.errors": (
+        "CompareError", "ConfigError", "GLContextError", "GeometryError", "MaterialError", "MeshError", "OpenCLError",
+        "PhysicsError", "ReconstructionError", "RenderError", "SceneError", "SpectrumError", "VoxelizeError",
+        "StarvationError", "StarvationWarning", "WeaveError", "XrayrasterError", "XrayrasterWarning",
+    ),
+    ".core.geometry": ("ConeBeamGeometry", "ParallelBeamGeometry", "VectorGeometry", "full_circle"),
+    ".core.projections": ("Projections",),
+    ".core.transform": ("Transform",),
+    ".core.volume": ("VolumeGeometry",),
+    ".gl.context": ("GLContext",),
+    ".gl.voxelize": ("LabelVolume", "voxelize"),
+    ".physics.detector": ("Detector",),
+    ".physics.radiograph": ("Radiograph",),
+    ".physics.realism": ("Realism",),
+    ".physics.spectrum": ("Spectrum",),
+    ".pipeline": ("Comparison", "ScanResult", "WeaveResult", "compare", "scan"),
+    ".recon.fdk": ("FDKStream", "Volume", "fdk"),
+    ".recon.opencl": ("CLContext",),
+    ".scene.materials": ("Material",),
+    ".scene.mesh": ("Mesh", "load_mesh"),
+    ".scene.scene": ("Scene", "SceneObject"),
+    ".simulate.renderer": ("Renderer",),
+}
+__getattr__, __dir__ = lazy_names(globals(), _HOMES)
+__all__ = sorted([*(name for names in _HOMES.values() for name in names), "weave"])
+
+
+class _CallableModule(types.ModuleType):
+    """``xrayraster.weave``, callable: ``xr.weave(path)`` makes a sample as ``xrayraster weave`` does.
+
+    ``xr.weave`` is both the subpackage (``xr.weave.UnitCell``, ``xr.weave.Sample``: docs/weave.md)
+    and the one-call pipeline beside ``xr.scan``. A module cannot be called, so its class is made
+    this subclass. It is done here: the weave layer may not import the pipeline above it, and this
+    module runs before the subpackage whichever is imported first (``import xrayraster.weave``
+    imports its parent first), so ``xr.weave`` is always callable.
+    """
+
+    def __call__(self, source, **options):
+        """:func:`xrayraster.pipeline.woven.weave`: a weave file (path or table) → ``xr.WeaveResult``."""
+        from .pipeline.woven import weave as run
+
+        return run(source, **options)
+
+
+weave.__class__ = _CallableModule

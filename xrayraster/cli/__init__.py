@@ -1,21 +1,27 @@
 """The xrayraster command line, one module per command; nothing in the package imports it.
 
 Exit status: 0 done; 2 bad input (the message names the file, field or flag and the fix);
-130 interrupted (Ctrl-C); 1 anything else: a file-system failure during the work (disk full), or
-a bug. Every failure is one line on stderr; a bug's traceback is printed with ``-v``.
+130 interrupted (Ctrl-C), 143 terminated (SIGTERM); 1 anything else: a file-system failure during
+the work (disk full), or a bug. Every failure is one line on stderr; a bug's traceback is printed
+with ``-v``.
+
+Only the standard library is imported here, so :func:`main` handles signals (:mod:`.interrupts`)
+before the second of imports the commands need (numpy, trimesh, OpenCL...), and ``--version``
+answers without them.
 """
 
 from __future__ import annotations
 
 import argparse
 import logging
+import signal
 import sys
 import traceback
 import warnings
 
 from .. import __version__
-from ..core.errors import XrayrasterError, XrayrasterWarning
-from . import compare, reconstruct, render, scan, voxelize, weave
+from ..core.errors import XrayrasterError, XrayrasterWarning  # standard library only
+from . import interrupts
 
 EXIT_OK, EXIT_UNEXPECTED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 
@@ -26,41 +32,57 @@ def one_line(text) -> str:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="xrayraster", description="X-ray CT simulation from triangle meshes.")
-    parser.add_argument("--version", action="version", version=f"xrayraster {__version__}")
-    subparsers = parser.add_subparsers(dest="command", required=True)
-    for command in (scan, weave, render, reconstruct, voxelize, compare):
-        command.add_parser(subparsers)
+    interrupts.install()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    verbose = "-v" in argv or "--verbose" in argv  # for a failure before the arguments are parsed
     try:
+        if argv == ["--version"]:  # answered before the commands' second of imports
+            print(f"xrayraster {__version__}")
+            return EXIT_OK
+        with interrupts.deferred():  # a library interrupted mid-import may swallow it, or crash
+            from . import compare, reconstruct, render, scan, voxelize, weave
+        parser = argparse.ArgumentParser(prog="xrayraster", description="X-ray CT simulation from triangle meshes.")
+        parser.add_argument("--version", action="version", version=f"xrayraster {__version__}")
+        subparsers = parser.add_subparsers(dest="command", required=True)
+        for command in (scan, weave, render, reconstruct, voxelize, compare):
+            command.add_parser(subparsers)
         args = parser.parse_args(argv)
-    except KeyboardInterrupt:
-        print("xrayraster: interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(message)s")
-    try:
+        verbose = args.verbose
+        logging.basicConfig(level=logging.INFO if verbose else logging.WARNING, format="%(message)s")
         with warnings.catch_warnings():  # restores showwarning for a caller of main (tests)
             warnings.showwarning = _show_warning
             warnings.simplefilter("always", XrayrasterWarning)  # each run says it, not only a process's first
             return args.run(args)
-    except XrayrasterError as exc:
+    except KeyboardInterrupt:
+        return _interrupted()
+    except Exception as exc:
+        if interrupts.received():  # third-party code turned the interrupt into another exception
+            return _interrupted()
+        return _failed(exc, verbose)
+
+
+def _interrupted() -> int:
+    interrupts.handled()
+    signum = interrupts.received() or signal.SIGINT  # a KeyboardInterrupt raised without a signal
+    what = "terminated" if signum == signal.SIGTERM else "interrupted"
+    print(f"xrayraster: {what}; no output written under its final name", file=sys.stderr)
+    return 128 + signum
+
+
+def _failed(exc: Exception, verbose: bool) -> int:
+    if isinstance(exc, XrayrasterError):
         print(f"xrayraster: error: {one_line(exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    except KeyboardInterrupt:
-        print("xrayraster: interrupted; no output written under its final name", file=sys.stderr)
-        return EXIT_INTERRUPTED
-    except OSError as exc:  # the file system during the work: disk full, a directory removed meanwhile
-        if args.verbose:
-            traceback.print_exc()
+    if verbose:
+        traceback.print_exc()
+    if isinstance(exc, OSError):  # the file system during the work: disk full, a directory removed meanwhile
         where = f" ({exc.filename})" if getattr(exc, "filename", None) else ""
         print(f"xrayraster: error: {one_line(exc.strerror or exc)}{where}", file=sys.stderr)
         return EXIT_UNEXPECTED
-    except Exception as exc:  # a bug
-        if args.verbose:
-            traceback.print_exc()
-        hint = "" if args.verbose else "; run with -v for the traceback"
-        print(f"xrayraster: unexpected error (a bug, please report it): {type(exc).__name__}: {one_line(exc)}{hint}",
-              file=sys.stderr)
-        return EXIT_UNEXPECTED
+    hint = "" if verbose else "; run with -v for the traceback"
+    print(f"xrayraster: unexpected error (a bug, please report it): {type(exc).__name__}: {one_line(exc)}{hint}",
+          file=sys.stderr)
+    return EXIT_UNEXPECTED
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:

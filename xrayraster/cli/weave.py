@@ -1,12 +1,12 @@
 """``xrayraster weave WEAVE.toml -o DIR``: a woven sample's meshes, report, scene file and voxel grid.
 
-``DIR`` is built under a temporary name and moved into place when complete
-(:func:`~xrayraster.core.files.atomic_directory`); an existing ``DIR`` is replaced only if it holds
-nothing but an earlier ``xrayraster weave`` output (``--force``: its files are replaced, anything
-else in it is kept). It then holds the mesh files, ``report.json``,
-``scene.toml`` (``xrayraster render DIR/scene.toml``) and ``scan.json``, a voxel grid over the
-sample at the scene's magnified pixel pitch (``xrayraster voxelize DIR/scene.toml --scan-file
-DIR/scan.json``).
+What ``xr.weave(WEAVE.toml).save(DIR)`` does (:mod:`xrayraster.pipeline.woven`). ``DIR`` is built
+under a temporary name and moved into place when complete; an existing ``DIR`` is replaced only if
+it holds nothing but an earlier ``xrayraster weave`` output (``--force``: its files are replaced,
+anything else in it is kept), which is checked before any work. It then holds
+the mesh files, ``report.json``, ``scene.toml`` (``xrayraster render DIR/scene.toml``) and
+``scan.json``, a voxel grid over the sample at the scene's magnified pixel pitch (``xrayraster
+voxelize DIR/scene.toml --scan-file DIR/scan.json``).
 """
 
 from __future__ import annotations
@@ -15,11 +15,8 @@ import time
 from pathlib import Path
 
 from ..core.choices import EXPORT_PER, MESH_FORMATS, WEAVE_RESOLVE
-from ..core.files import atomic_directory
-from ..io.weave_file import framing_geometry, load_weave_file, sample_grid, write_scan_file, write_scene_file
-from ..weave.export import GENERATOR, REPORT_NAME
-
-SCENE_NAME, SCAN_NAME = "scene.toml", "scan.json"
+from ..io.weave_file import load_weave_file
+from ..pipeline.woven import SCAN_NAME, SCENE_NAME, output_directory, weave
 
 
 def add_parser(subparsers) -> None:
@@ -43,13 +40,11 @@ def add_parser(subparsers) -> None:
 def run(args) -> int:
     loaded = load_weave_file(args.weave)
     start = time.perf_counter()
-    with atomic_directory(args.out, marker=REPORT_NAME, generator=GENERATOR, overwrite=args.force,
-                          names=(REPORT_NAME, SCENE_NAME, SCAN_NAME)) as tmp:
-        report = loaded.sample.write_export(tmp, materials=loaded.materials, per=args.per, fmt=args.format,
-                                      resolve=args.resolve, progress=not args.quiet)
-        geometry = framing_geometry(report["box_mm"])
-        write_scene_file(tmp / SCENE_NAME, report, geometry)
-        write_scan_file(tmp / SCAN_NAME, sample_grid(report["box_mm"], geometry))
+    # Entered first: an output it may not replace is refused before any work.
+    with output_directory(args.out, overwrite=args.force) as tmp:
+        result = weave(loaded, per=args.per, fmt=args.format, resolve=args.resolve, progress=not args.quiet)
+        result.write(tmp)
+    report = result.report
     seconds = time.perf_counter() - start
     fractions = ", ".join(f"{k} {v:.3f}" for k, v in report["volume_fraction"].items())
     print(f"{args.out}: {len(report['parts'])} mesh files ({report['triangles']} triangles), {report['yarns']['total']} "

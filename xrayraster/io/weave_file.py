@@ -17,6 +17,7 @@ and a tube source, so ``xrayraster render`` and ``xrayraster voxelize`` take it 
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -52,22 +53,26 @@ DEFAULT_SOURCE = {"kvp": 40.0, "filters": {"Al": 2.0}, "mas": 1.25}
 
 @dataclass(frozen=True)
 class WeaveFile:
-    """A loaded weave file: the sample to generate and its materials."""
+    """A loaded weave file: the sample to generate and its materials (``path`` None for a table)."""
 
-    path: Path
+    path: Path | None
     sample: Sample
     materials: YarnMaterials
 
 
-def load_weave_file(path) -> WeaveFile:
-    """Read and validate a weave file; errors name the file, the table and the field."""
-    path = Path(path)
-    data = read_toml(path, "weave file")
-    fields.only(data, {"weave", "materials"}, f"{path}")
+def load_weave_file(source) -> WeaveFile:
+    """Read and validate a weave file, or the dict of one already parsed (TOML's tables as dicts);
+    errors name the file (or "weave table"), the table and the field."""
+    if isinstance(source, Mapping):
+        path, data, where = None, source, "weave table"
+    else:
+        path = Path(source)
+        data, where = read_toml(path, "weave file"), f"{path}"
+    fields.only(data, {"weave", "materials"}, where)
     if "weave" not in data:
-        raise ConfigError(f"{path}: missing [weave] table (the unit cell; every key may be left at its default)")
-    materials = _materials(data["materials"], f"{path} [materials]") if "materials" in data else {}
-    sample, yarn_materials = weave_from_dict(data["weave"], materials, f"{path} [weave]")
+        raise ConfigError(f"{where}: missing [weave] table (the unit cell; every key may be left at its default)")
+    materials = _materials(data["materials"], f"{where} [materials]") if "materials" in data else {}
+    sample, yarn_materials = weave_from_dict(data["weave"], materials, f"{where} [weave]")
     return WeaveFile(path, sample, yarn_materials)
 
 

@@ -1,13 +1,18 @@
-"""Woven-composite geometry: unit cells, yarn paths and their meshes (needs no OpenGL)."""
+"""Woven-composite geometry: unit cells, yarn paths and their meshes (needs no OpenGL).
 
-from .distort import Distortion
-from .materials import FibreBundle, Tracer, YarnMaterials
-from .resolve import Interpenetration, Resolved, interpenetration, resolve_boolean
-from .sample import Sample
-from .spec import Section, UnitCell
-from .textomos import TextomosImport, read_textomos
+The names below are imported on first use (core/lazy.py): importing this package is cheap, so
+``import xrayraster`` can make ``xr.weave`` callable without loading trimesh and manifold3d.
+"""
 
-__all__ = [
-    "Distortion", "FibreBundle", "Interpenetration", "Resolved", "Sample", "Section", "TextomosImport", "Tracer",
-    "UnitCell", "YarnMaterials", "interpenetration", "read_textomos", "resolve_boolean",
-]
+from ..core.lazy import lazy_names
+
+_HOMES = {
+    ".distort": ("Distortion",),
+    ".materials": ("FibreBundle", "Tracer", "YarnMaterials"),
+    ".resolve": ("Interpenetration", "Resolved", "interpenetration", "resolve_boolean"),
+    ".sample": ("Sample",),
+    ".spec": ("Section", "UnitCell"),
+    ".textomos": ("TextomosImport", "read_textomos"),
+}
+__getattr__, __dir__ = lazy_names(globals(), _HOMES)
+__all__ = sorted(name for names in _HOMES.values() for name in names)

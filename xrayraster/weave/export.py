@@ -33,7 +33,7 @@ from .manifold_mesh import box_minus, from_manifold, to_manifold, union, without
 
 __all__ = [
     "GENERATOR", "REPORT_NAME", "Part", "material_entry", "merge_meshes", "mesh_bounds", "occupied_volumes",
-    "settle", "write_parts", "write_report",
+    "part_file", "settle", "write_parts", "write_report",
 ]
 
 REPORT_NAME = "report.json"
@@ -101,10 +101,15 @@ def write_parts(parts: list[Part], directory, fmt: str) -> dict[str, str]:
     directory = Path(directory)
     files = {}
     for part in parts:
-        name = f"{part.name}.{fmt}"
+        name = part_file(part.name, fmt)
         atomic_write(directory / name, lambda tmp, mesh=part.mesh: mesh.export(tmp, file_type=fmt))
         files[part.name] = name
     return files
+
+
+def part_file(name: str, fmt: str) -> str:
+    """The file name of part ``name``'s mesh."""
+    return f"{name}.{fmt}"
 
 
 def write_report(report: dict, directory) -> Path:

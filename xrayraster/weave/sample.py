@@ -54,6 +54,7 @@ from .export import (
     merge_meshes,
     mesh_bounds,
     occupied_volumes,
+    part_file,
     settle,
     write_parts,
     write_report,
@@ -387,34 +388,36 @@ class Sample:
 
     def export(self, directory, *, materials=None, per: str = "family", fmt: str = "stl",
                resolve: str = "priority", progress: bool = False, overwrite: bool = False) -> dict:
-        """Write the meshes and ``report.json`` into ``directory``; returns the report (docs/weave.md).
+        """Write the meshes (one ``<part>.<fmt>`` file per :meth:`parts` entry, ``fmt`` "stl" or
+        "ply") and ``report.json`` into ``directory``; returns the report (:meth:`exported`).
 
         The directory is built beside ``directory`` and moved into place whole
         (:func:`~xrayraster.core.files.atomic_directory`; ``report.json`` records the names written):
         an existing ``directory`` is replaced only if it holds nothing but an earlier export, else
         :class:`~xrayraster.ConfigError` before any work; ``overwrite=True`` then replaces the earlier
-        export's files and keeps every other entry. The files are :meth:`write_export`'s.
+        export's files and keeps every other entry.
         """
-        check_choice(fmt, MESH_FORMATS, "format", WeaveError)
         with atomic_directory(directory, marker=REPORT_NAME, generator=GENERATOR, overwrite=overwrite) as tmp:
-            return self.write_export(tmp, materials=materials, per=per, fmt=fmt, resolve=resolve, progress=progress)
+            parts, report = self.exported(materials, per=per, fmt=fmt, resolve=resolve, progress=progress)
+            _stage(progress, f"writing {len(parts)} mesh files")
+            write_parts(parts, tmp, fmt)
+            write_report(report, tmp)
+        return report
 
-    def write_export(self, directory, *, materials=None, per: str = "family", fmt: str = "stl",
-                     resolve: str = "priority", progress: bool = False) -> dict:
-        """Write the meshes and ``report.json`` into ``directory``, a new directory the caller owns
-        (:meth:`export` makes one safely); returns the report.
+    def exported(self, materials=None, *, per: str = "family", fmt: str = "stl", resolve: str = "priority",
+                 progress: bool = False) -> tuple[list[Part], dict]:
+        """What :meth:`export` writes, in memory: the parts (one mesh file each) and the report.
 
-        One ``<part>.<fmt>`` file per :meth:`parts` entry (``fmt`` "stl" or "ply"), each written
-        atomically. The report gives the cell, tiling, resolution, seed and distortion; yarn counts;
-        every part's file, family, label, priority and material; the materials (density g/cm³, mass
+        The report gives the cell, tiling, resolution, seed and distortion; yarn counts; every
+        part's file, family, label, priority and material; the materials (density g/cm³, mass
         fractions); the box and the meshes' bounds (mm); each family's occupied volume (mm³) and
         fraction of the box (:func:`~xrayraster.weave.export.occupied_volumes`); and the
         interpenetration before and after resolving.
         """
+        check_choice(fmt, MESH_FORMATS, "format", WeaveError)
         start = time.perf_counter()
         parts, facts = self.parts(materials, per=per, resolve=resolve, progress=progress)
-        _stage(progress, f"writing {len(parts)} mesh files and measuring the families' volumes")
-        files = write_parts(parts, directory, fmt)
+        _stage(progress, "measuring the families' volumes")
         volumes = occupied_volumes(parts, PRIORITIES)
         lo, hi = self.box
         box_volume = float(np.prod(hi - lo))
@@ -427,7 +430,7 @@ class Sample:
             "resolve": resolve, "per": per, "format": fmt,
             "yarns": facts["yarns"],
             "triangles": int(sum(len(p.mesh.faces) for p in parts)),
-            "parts": [{"name": p.name, "file": files[p.name], "family": p.family, "label": p.label,
+            "parts": [{"name": p.name, "file": part_file(p.name, fmt), "family": p.family, "label": p.label,
                        "priority": p.priority, "material": key} for p, key in zip(parts, keys)],
             "materials": {key: material_entry(p.material) for p, key in zip(parts, keys)},
             "box_mm": [lo.tolist(), hi.tolist()],
@@ -437,8 +440,7 @@ class Sample:
             "interpenetration_mm3": facts["interpenetration_mm3"],
             "seconds": round(time.perf_counter() - start, 3),
         }
-        write_report(report, directory)
-        return report
+        return parts, report
 
     def _materials(self, materials) -> tuple[dict, dict]:
         """(family → Material, tracer yarn → (Material, label or None)), tracer names checked."""
