@@ -17,6 +17,7 @@ from ..core.choices import EXPORT_PER, MESH_FORMATS, WEAVE_RESOLVE
 from ..core.files import atomic_directory
 from ..io.weave_file import framing_geometry, load_weave_file, sample_grid, write_scan_file, write_scene_file
 from ..weave.export import is_export
+from ..weave.size import weave_estimate
 
 SCENE_NAME, SCAN_NAME = "scene.toml", "scan.json"
 
@@ -39,6 +40,7 @@ def add_parser(subparsers) -> None:
 
 def run(args) -> int:
     loaded = load_weave_file(args.weave)
+    weave_estimate(loaded.sample, args.resolve).announce()
     start = time.perf_counter()
     with atomic_directory(args.out, replaceable=is_export) as tmp:
         report = loaded.sample.export(tmp, materials=loaded.materials, per=args.per, fmt=args.format,

@@ -27,6 +27,7 @@ from ..physics.detector import Detector
 from ..recon.fdk import FDKStream, Volume
 from ..recon.opencl import CLContext
 from ..simulate.renderer import Renderer
+from .plan import check_scan
 from .scan_file import ScanFile, load_scan_file
 
 __all__ = ["ScanResult", "is_scan_output", "scan"]
@@ -92,8 +93,13 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False) -
     noise and realism as the file says) in batches, each fed to ``xr.FDKStream`` on the file's grid
     → ``xr.voxelize`` of the sample on the same grid. ``progress``: a bar with ETA for the
     projections (True), a callable ``progress(done, total)``, or nothing (False).
-    ``keep_projections``: return the projections too (otherwise each batch is freed once filtered)."""
+    ``keep_projections``: return the projections too (otherwise each batch is freed once filtered).
+    Before any work, a scan that cannot fit in memory is refused (ConfigError naming the key), and
+    with ``progress=True`` the estimate of a long one is printed on stderr (:mod:`.plan`)."""
     loaded = scan_file_or_path if isinstance(scan_file_or_path, ScanFile) else load_scan_file(scan_file_or_path)
+    estimate = check_scan(loaded, BATCH_VIEWS)
+    if progress is True:
+        estimate.announce()
     options = loaded.options
     seconds = dict.fromkeys(STAGES, 0.0)  # projections and fdk take turns, so each is a sum
     with _timed(seconds, "sample"):
