@@ -527,9 +527,12 @@ def test_scalar_volume_arguments_broadcast():
 
 
 def test_vector_array_is_made_once_and_read_only():
-    """``.array`` is built once per geometry (a renderer reads one row per view) and cannot be
-    written through; it is no field, so equality, hash and repr are the vectors' alone."""
-    vec = ConeBeamGeometry(100, 250, **HAND).to_vec()
+    """``.to_vec()`` and ``.array`` are built once per geometry (a renderer reads one row per view)
+    and the array cannot be written through; neither is a field, so equality, hash and repr are the
+    fields' alone."""
+    circular = ConeBeamGeometry(100, 250, **HAND)
+    vec = circular.to_vec()
+    assert circular.to_vec() is vec  # the renderer and the FDK of one scan share it
     array = vec.array
     assert vec.array is array
     assert not array.flags.writeable

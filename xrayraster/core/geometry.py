@@ -178,6 +178,11 @@ class _ScanGeometry:
         set_field(self, "angles", _angles(self.angles))
         set_field(self, "detector_offset", pair("detector_offset", self.detector_offset, positive=False))
 
+    def to_vec(self) -> "VectorGeometry":
+        """The per-view vector form (:class:`VectorGeometry`), made once per geometry: the renderer
+        and the reconstruction of one scan share it."""
+        return self._vectors
+
     def _per_view(self) -> tuple:
         return getattr(self, self._per_view_field())
 
@@ -242,7 +247,8 @@ class ConeBeamGeometry(_ScanGeometry):
         rows = math.ceil(2.04 * half_v / pixel)
         return cls(sod, sdd, (rows, n), pixel, full_circle(num_views))
 
-    def to_vec(self) -> "VectorGeometry":
+    @cached_property
+    def _vectors(self) -> "VectorGeometry":
         c, s, u, v = _turned_detector(self.angles, self.pixel_size)
         src = np.column_stack([s * self.source_to_origin, -c * self.source_to_origin, np.zeros_like(c)])
         gap = self.source_to_detector - self.source_to_origin
@@ -266,7 +272,8 @@ class ParallelBeamGeometry(_ScanGeometry):
     def beam(self) -> str:
         return "parallel"
 
-    def to_vec(self) -> "VectorGeometry":
+    @cached_property
+    def _vectors(self) -> "VectorGeometry":
         c, s, u, v = _turned_detector(self.angles, self.pixel_size)
         ray = np.column_stack([-s, c, np.zeros_like(c)])
         det = _offset(np.zeros_like(u), u, v, self.pixel_size, self.detector_offset)
