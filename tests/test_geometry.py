@@ -578,3 +578,10 @@ def test_view_counts_whose_geometry_cannot_fit_are_refused_before_any_view_is_ma
         xr.core.geometry.geometry_from_dict(d, "scan.toml [geometry]")
     assert time.perf_counter() - start < 1.0
     assert len(full_circle(1000)) == 1000
+
+
+def test_a_geometry_that_exists_writes_its_dict_whatever_the_free_memory(monkeypatch):
+    """to_dict does not check the memory again: a long scan's metadata is written at its end."""
+    g = ConeBeamGeometry(100, 250, (3, 4), 0.5, full_circle(1000))
+    monkeypatch.setattr(xr.core.memory, "available_memory", lambda: 1)
+    assert g.to_dict()["num_views"] == 1000

@@ -105,6 +105,12 @@ def circular_arc(num_views: int, start: float = 0.0, arc: float = 2 * math.pi) -
     refused (GeometryError) when their geometry cannot fit in memory."""
     n = positive_ints("num_views", num_views, 1)[0]
     check_view_count(n)
+    return _arc(n, start, arc)
+
+
+def _arc(n: int, start: float, arc: float) -> tuple[float, ...]:
+    """:func:`circular_arc` without its checks: for angles that exist already (``to_dict``), which a
+    memory check must not refuse at the end of a long scan."""
     return tuple(float(start + arc * k / n) for k in range(n))
 
 
@@ -419,6 +425,6 @@ def _angles_from_dict(d: dict, where: str) -> tuple[float, ...]:
 def _angles_to_dict(angles: tuple[float, ...]) -> dict:
     """``num_views`` (and ``start_angle_deg``) where that gives back these very angles, else ``angles_deg``."""
     start = math.degrees(angles[0])
-    if circular_arc(len(angles), math.radians(start)) == angles:
+    if _arc(len(angles), math.radians(start), 2 * math.pi) == angles:
         return {"num_views": len(angles)} | ({"start_angle_deg": start} if start else {})
     return {"angles_deg": [math.degrees(a) for a in angles]}
