@@ -9,6 +9,7 @@ import os
 import resource
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -94,13 +95,21 @@ def test_a_long_scan_prints_its_estimate_before_work(tmp_path):
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     proc = subprocess.Popen([sys.executable, "-m", "xrayraster", "scan", str(path), "-o", str(tmp_path / "out")],
                             cwd=tmp_path, env=env, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)
+    watchdog = threading.Timer(60, proc.kill)  # a scan that never prints its estimate fails, not hangs
+    watchdog.start()
+    lines = []
     try:
-        first = proc.stderr.readline()
+        for line in proc.stderr:
+            lines.append(line)
+            if line.startswith("estimate:"):
+                break
     finally:
+        watchdog.cancel()
         proc.kill()
         proc.wait(timeout=20)
-    assert first.startswith("estimate: scan of 20000 views into 256×256×256 voxels: about "), first
-    assert "min" in first or " h " in first
+    assert lines and lines[-1].startswith("estimate: scan of 20000 views into 256×256×256 voxels: about "), lines
+    assert not any("projections" in line or "yarns" in line for line in lines[:-1]), lines  # before the work
+    assert "min" in lines[-1] or " h " in lines[-1]
 
 
 def test_render_refuses_a_stack_that_cannot_fit_and_estimates_a_long_one(tmp_path, monkeypatch):
