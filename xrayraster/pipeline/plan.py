@@ -49,10 +49,12 @@ def scan_estimate(loaded: ScanFile, batch_views: int) -> Estimate:
         meshes = Part(f"meshes of {triangles} triangles", triangles * BYTES_PER_SCENE_TRIANGLE, "[[objects]] mesh",
                       "use coarser meshes")
         meshing = 0.0
-    triangles += loaded.mount.num_triangles if loaded.mount is not None else 0
+    mounted = loaded.mount.num_triangles if loaded.mount is not None else 0
+    triangles += mounted
     parts = (
         Part("views' geometry", views * BYTES_PER_VIEW, f"[geometry] num_views = {views}", "use fewer views"),
         meshes,
+        Part(f"mount of {mounted} triangles", mounted * BYTES_PER_SCENE_TRIANGLE, "[[mount]] mesh", "use coarser meshes"),
         Part(f"a batch of {batch_views} views", min(views, batch_views) * rows * cols * BYTES_PER_BATCH_PIXEL,
              f"[geometry] detector_shape = {[rows, cols]}", "use fewer detector pixels"),
         Part("float32 volume", voxels * 4, shape, grid_fix),
