@@ -521,3 +521,67 @@ def test_scalar_volume_arguments_broadcast():
     assert g.shape == (4, 4, 4)
     assert g.voxel_size == (0.5, 0.5, 0.5)
     assert g.offset == (0.0, 0.0, 0.0)
+
+
+# --------------------------------------------------------------------------- many views
+
+
+def test_vector_array_is_made_once_and_read_only():
+    """``.to_vec()`` and ``.array`` are built once per geometry (a renderer reads one row per view)
+    and the array cannot be written through; neither is a field, so equality, hash and repr are the
+    fields' alone."""
+    circular = ConeBeamGeometry(100, 250, **HAND)
+    vec = circular.to_vec()
+    assert circular.to_vec() is vec  # the renderer and the FDK of one scan share it
+    array = vec.array
+    assert vec.array is array
+    assert not array.flags.writeable
+    with pytest.raises(ValueError):
+        array[0, 0] = 1.0
+    np.testing.assert_array_equal(array, np.array(vec.vectors))
+    again = VectorGeometry(vec.beam, vec.detector_shape, vec.vectors)
+    assert again == vec and hash(again) == hash(vec) and repr(again) == repr(vec)
+
+
+def test_one_view_costs_the_same_at_any_view_count():
+    """One view's pixel centres take no longer at 10⁵ views than at 100: nothing per view is
+    rebuilt for every view (before, each call copied the whole geometry: ~1000× slower here)."""
+    import time
+
+    def per_call(n: int) -> float:
+        vec = ConeBeamGeometry(100, 250, (3, 4), 0.5, full_circle(n)).to_vec()
+        detector_pixel_centres(vec, 0)
+        best = math.inf
+        for _ in range(5):
+            start = time.perf_counter()
+            for view in range(0, n, n // 50):
+                detector_pixel_centres(vec, view)
+            best = min(best, (time.perf_counter() - start) / 50)
+        return best
+
+    assert per_call(100_000) < 10 * per_call(100) + 1e-4  # coarse: a loaded machine's noise passes
+
+
+def test_view_counts_whose_geometry_cannot_fit_are_refused_before_any_view_is_made(monkeypatch):
+    """num_views is checked against the memory first (1.5 KB a view), naming the key and the memory:
+    10⁷ views (15 GB) against 1 GiB available, in the API and in the dict form."""
+    import time
+
+    monkeypatch.setattr(xr.core.memory, "available_memory", lambda: 2**30)
+    start = time.perf_counter()
+    with pytest.raises(GeometryError, match=r"num_views = 10000000 .*GiB, more than half the 1.00 GiB available; "
+                                            "use fewer views"):
+        full_circle(10**7)
+    d = {"source_to_origin": 100, "source_to_detector": 250, "detector_shape": [3, 4], "pixel_size": 0.5,
+         "num_views": 10**7}
+    with pytest.raises(xr.ConfigError, match=r"^scan\.toml \[geometry\]: num_views = 10000000 .*GiB"):
+        xr.core.geometry.geometry_from_dict(d, "scan.toml [geometry]")
+    assert time.perf_counter() - start < 1.0
+    assert len(full_circle(1000)) == 1000
+
+
+def test_a_geometry_that_exists_writes_its_dict_whatever_the_free_memory(monkeypatch):
+    """to_dict does not check the memory again: a long scan's metadata is written at its end."""
+    g = ConeBeamGeometry(100, 250, (3, 4), 0.5, full_circle(1000))
+    monkeypatch.setattr(xr.core.memory, "available_memory", lambda: 1)
+    assert g.to_dict()["num_views"] == 1000

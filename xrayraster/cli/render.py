@@ -12,6 +12,7 @@ from ..core.projections import Projections
 from ..io.scene_file import load_scene_file
 from ..physics.detector import Detector
 from ..physics.starvation import starved_share, warn_if_starved
+from ..simulate.estimate import render_estimate
 from ..simulate.renderer import Renderer
 from .options import nonnegative_int, positive_int
 from .outputs import check_outputs, quicklook_path
@@ -53,6 +54,7 @@ def _render_path_lengths(args) -> int:
     loaded = load_scene_file(args.scene)
     geometry, scene = loaded.geometry, loaded.scene
     views = parse_views(args.views, geometry.num_views)
+    _planned(views, geometry, scene, len(scene.materials), args.supersampling)
     start = time.perf_counter()
     with Renderer(geometry, supersampling=args.supersampling, overlap=args.overlap) as renderer:
         projections = renderer.path_lengths_all(scene, views)
@@ -65,6 +67,13 @@ def _render_path_lengths(args) -> int:
         f"px, max {stack.max():.4f} mm, {method} pass, {seconds:.2f} s on {driver}; quick-look {png}"
     )
     return 0
+
+
+def _planned(views: list[int], geometry, scene, channels: int, supersampling: int) -> None:
+    """Refuse a stack that cannot fit in memory and print the estimate of a long render, before the GL starts."""
+    estimate = render_estimate(len(views), geometry.detector_shape, scene.num_triangles, channels, supersampling)
+    estimate.check(ConfigError)
+    estimate.announce()
 
 
 def _render_radiographs(args) -> int:
@@ -84,6 +93,7 @@ def _render_radiographs(args) -> int:
     # The flats' noise and the gain map are drawn from the seed, with or without the views' noise.
     seed = (0 if args.seed is None else args.seed) if args.noise or loaded.realism.needs_seed else None
     views = parse_views(args.views, geometry.num_views)
+    _planned(views, geometry, scene, 1, args.supersampling)
     start = time.perf_counter()
     with Renderer(geometry, supersampling=args.supersampling, overlap=args.overlap) as renderer:
         projections = renderer.project_all(scene, spectrum, views, detector=detector, output=output, noise=args.noise,

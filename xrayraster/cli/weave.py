@@ -17,6 +17,7 @@ from pathlib import Path
 from ..core.choices import EXPORT_PER, MESH_FORMATS, WEAVE_RESOLVE
 from ..io.weave_file import load_weave_file
 from ..pipeline.woven import SCAN_NAME, SCENE_NAME, output_directory, weave
+from ..weave.size import weave_estimate
 
 
 def add_parser(subparsers) -> None:
@@ -39,6 +40,7 @@ def add_parser(subparsers) -> None:
 
 def run(args) -> int:
     loaded = load_weave_file(args.weave)
+    weave_estimate(loaded.sample, args.resolve).announce()
     start = time.perf_counter()
     # Entered first: an output it may not replace is refused before any work.
     with output_directory(args.out, overwrite=args.force) as tmp:

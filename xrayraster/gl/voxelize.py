@@ -39,7 +39,7 @@ import numpy as np
 from ..core.choices import VOXELIZE_METHODS, check_choice
 from ..core.errors import VoxelizeError
 from ..core.geometry import VectorGeometry
-from ..core.memory import available_memory
+from ..core.memory import check_fits
 from ..core.tiff import checked_outputs, write_quicklook, write_volume
 from ..core.volume import VolumeGeometry
 from ..scene.scene import Scene
@@ -126,13 +126,8 @@ def voxelize(scene: Scene, volume: VolumeGeometry, *, fractions: int | None = No
     dtype = np.uint8 if labels[-1] < 256 else np.uint16
     nz, ny, nx = volume.shape
     itemsize = np.dtype(dtype).itemsize + (4 * (len(labels) + 1) if fractions else 0)
-    need = nz * ny * nx * itemsize
-    free = available_memory()
-    if free is not None and need > free // 2:
-        raise VoxelizeError(
-            f"a {nz}×{ny}×{nx} label volume{' with fractions' if fractions else ''} needs {need / 2**30:.2f} GiB, more "
-            f"than half the {free / 2**30:.2f} GiB available; voxelize a smaller volume or part of it "
-            "(VolumeGeometry.offset)")
+    check_fits(nz * ny * nx * itemsize, f"a {nz}×{ny}×{nx} label volume{' with fractions' if fractions else ''}",
+               "voxelize a smaller volume or part of it (VolumeGeometry.offset)", VoxelizeError)
     owns = context is None
     gl = context or GLContext()
     try:

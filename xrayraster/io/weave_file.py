@@ -34,6 +34,7 @@ from ..scene.materials import Material
 from ..weave.distort import Distortion
 from ..weave.materials import FibreBundle, Tracer, YarnMaterials
 from ..weave.sample import Sample
+from ..weave.size import weave_estimate
 from ..weave.spec import UnitCell
 from .scene_file import _library, _materials, read_toml
 
@@ -73,6 +74,7 @@ def load_weave_file(source) -> WeaveFile:
         raise ConfigError(f"{where}: missing [weave] table (the unit cell; every key may be left at its default)")
     materials = _materials(data["materials"], f"{where} [materials]") if "materials" in data else {}
     sample, yarn_materials = weave_from_dict(data["weave"], materials, f"{where} [weave]")
+    weave_estimate(sample).check(ConfigError, f"{where} [weave.sample] ")
     return WeaveFile(path, sample, yarn_materials)
 
 

@@ -28,6 +28,7 @@ from ..physics.starvation import refuse_if_starved, starved_share, warn_if_starv
 from ..recon.fdk import FDKStream, Volume
 from ..recon.opencl import CLContext
 from ..simulate.renderer import Renderer
+from .plan import check_scan
 from .scan_file import ScanFile, load_scan_file
 
 __all__ = ["ScanResult", "check_scan_output", "scan"]
@@ -106,8 +107,14 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False, a
     pixels the sample covers that detected no photon, over the views so far; over half is a
     :class:`~xrayraster.core.errors.StarvationError` at once (after the first batch when the
     exposure is that low) unless ``allow_starved``, and over 1 % at the end a ``StarvationWarning``.
-    ``metadata["projections"]["starved_share"]`` records it."""
+    ``metadata["projections"]["starved_share"]`` records it.
+
+    Before any work, a scan that cannot fit in memory is refused (ConfigError naming the key), and
+    with ``progress=True`` the estimate of a long one is printed on stderr (:mod:`.plan`)."""
     loaded = scan_file_or_path if isinstance(scan_file_or_path, ScanFile) else load_scan_file(scan_file_or_path)
+    estimate = check_scan(loaded, BATCH_VIEWS)
+    if progress is True:
+        estimate.announce()
     options = loaded.options
     seconds = dict.fromkeys(STAGES, 0.0)  # projections and fdk take turns, so each is a sum
     with _timed(seconds, "sample"):

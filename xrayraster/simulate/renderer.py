@@ -15,6 +15,7 @@ from ..physics.detector import Detector
 from ..physics.radiograph import Radiograph, SpectralModel, flat_noise, radiograph, spectral_model
 from ..physics.realism import FLAT_TAG, GAIN_TAG, Realism, calibration_rng, focal_sigma_px, gain_map
 from ..scene.scene import Scene
+from .estimate import render_estimate
 
 
 class Renderer(PathLengthRenderer):
@@ -105,8 +106,10 @@ class Renderer(PathLengthRenderer):
 
         ``progress``: ``True`` a tqdm bar on stderr, ``False`` none, or a callable
         ``progress(done, total)`` called after each view; default a bar when stderr is a terminal.
+        A stack that cannot fit in memory is refused before any view is rendered.
         """
         views = self._views(views)
+        self._check_stack(scene, views, len(scene.materials))
         stack = np.stack([self.path_lengths(scene, v) for v in _report(views, progress, "path lengths")])
         return Projections(stack, self.geometry[views], "path_length", "mm", {
             "materials": [_material_name(m) for m in scene.materials],
@@ -130,6 +133,7 @@ class Renderer(PathLengthRenderer):
         and measured error when one was used. ``progress`` as in :meth:`path_lengths_all`.
         """
         views = self._views(views)
+        self._check_stack(scene, views, 1)
         detector = detector or Detector()
         realism = realism or Realism()
         shots = [self.project(scene, spectrum, v, detector=detector, output=output, noise=noise, seed=seed,
@@ -160,6 +164,13 @@ class Renderer(PathLengthRenderer):
             "renderer": self.gl.renderer,
             **extra,
         })
+
+    def _check_stack(self, scene: Scene, views: list[int], channels: int) -> None:
+        """Refuse a stack of ``views`` that cannot fit in memory (:mod:`~xrayraster.simulate.estimate`)."""
+        if not isinstance(scene, Scene):
+            raise RenderError(f"expected a Scene, got {type(scene).__name__}")
+        render_estimate(len(views), self.vector_geometry.detector_shape, scene.num_triangles, channels,
+                        self.supersampling).check(RenderError)
 
     def _views(self, views) -> list[int]:
         """``views`` (None: all) as a list of in-range indices, negatives counted from the end."""

@@ -62,6 +62,7 @@ from .export import (
 from .manifold_mesh import from_manifold, to_manifold
 from .materials import as_yarn_materials
 from .resolve import interpenetration, resolve_boolean
+from .size import weave_estimate
 from .spec import UnitCell
 from .sweep import bend_sagitta_mm, polygon_area
 from .yarn import LABELS, PRIORITIES, Yarn, section_outline
@@ -296,9 +297,12 @@ class Sample:
 
         A clipped yarn under :data:`REMNANT_FRACTION` of a full one (its outline's area times the
         box's length along it) is left out: a sliver of a neighbouring period's yarn along a side face.
-        ``progress``: a tqdm bar over the yarns on stderr.
+        ``progress``: a tqdm bar over the yarns on stderr. A sample whose meshes cannot fit in memory
+        is refused first (:mod:`~xrayraster.weave.size`).
         """
         import manifold3d
+
+        weave_estimate(self, export=False).check(WeaveError)
 
         lo, hi = self.yarn_box
         clip = manifold3d.Manifold.cube(tuple(hi - lo)).translate(tuple(lo))
@@ -337,6 +341,7 @@ class Sample:
         """
         check_choice(per, EXPORT_PER, "per", WeaveError)
         check_choice(resolve, WEAVE_RESOLVE, "resolve", WeaveError)
+        weave_estimate(self, resolve, export=False).check(WeaveError)  # the boolean's pairs hold far more
         family_materials, tracers = self._materials(materials)
         pieces = self.meshes(progress)
         matrix = self.matrix_mesh()

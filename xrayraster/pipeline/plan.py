@@ -1,0 +1,72 @@
+"""A scan's up-front plan: its time and memory from the scan file alone, before the sample is meshed.
+
+Memory: the parts that grow with the file's keys (:class:`~xrayraster.core.estimate.Part`): the
+views' geometry, the sample's meshes (a weave's triangles estimated from its cells and mesh knobs,
+:mod:`~xrayraster.weave.size`), one batch of projections and of filtered views, the volume and the
+labels. Time: the sample's meshing, the projections (:mod:`~xrayraster.simulate.estimate`), the
+FDK's backprojection (per voxel and view) and the labels (per voxel). The FDK's and the labels'
+rates come from the full twin on the development machine (801 views into 512³ voxels: FDK 119.5 s,
+labels 1.4 s, docs/twin.md) and are right to an order of magnitude.
+"""
+
+from __future__ import annotations
+
+from ..core.errors import ConfigError
+from ..core.estimate import Estimate, Part
+from ..core.geometry import BYTES_PER_VIEW
+from ..simulate.estimate import seconds_per_view
+from ..weave.size import SECONDS_PER_TRIANGLE as MESH_SECONDS_PER_TRIANGLE
+from ..weave.size import estimated_triangles, mesh_part
+from .scan_file import ScanFile
+
+SECONDS_PER_VOXEL_VIEW = 1.1e-9  # FDK: 119.5 s / (801 views × 512³ voxels)
+SECONDS_PER_VOXEL_LABEL = 1.4e-8  # labels: 1.4 s / 512³ (1.9 s in bench_voxelize)
+#: Bytes a triangle of the scanned scene holds: the meshes, the scene's placed copies and the GL
+#: upload. The twin's 1,260 MiB peak less its volume, labels, one batch and the 347 MiB of a tiny
+#: scan (the libraries, GL and OpenCL) leaves ~240 MiB for its 700 k triangles: ~360 B, rounded up.
+BYTES_PER_SCENE_TRIANGLE = 400
+#: A detector pixel of a view in flight: the line integrals, the radiograph's float64 temporaries
+#: and the filtered copy (twice as wide, zero-padded for the ramp filter).
+BYTES_PER_BATCH_PIXEL = 4 + 3 * 8 + 2 * 4
+
+
+def scan_estimate(loaded: ScanFile, batch_views: int) -> Estimate:
+    """The plan of ``xr.scan(loaded)``, rendering and filtering ``batch_views`` views at a time."""
+    geometry, volume = loaded.geometry, loaded.volume
+    views, (rows, cols) = geometry.num_views, geometry.detector_shape
+    nz, ny, nx = volume.shape
+    voxels = nz * ny * nx
+    shape = f"[volume] shape = {list(volume.shape)}"
+    grid_fix = "use a coarser grid (shape, voxel_size) or a part of it (offset)"
+    if loaded.weave is not None:
+        sample = loaded.weave.sample
+        triangles = estimated_triangles(sample)
+        meshes = mesh_part(sample, BYTES_PER_SCENE_TRIANGLE)
+        meshes = Part(meshes.what, meshes.bytes, f"[weave.sample] {meshes.key}", meshes.fix)
+        meshing = triangles * MESH_SECONDS_PER_TRIANGLE
+    else:
+        triangles = loaded.scene.num_triangles
+        meshes = Part(f"meshes of {triangles} triangles", triangles * BYTES_PER_SCENE_TRIANGLE, "[[objects]] mesh",
+                      "use coarser meshes")
+        meshing = 0.0
+    mounted = loaded.mount.num_triangles if loaded.mount is not None else 0
+    triangles += mounted
+    parts = (
+        Part("views' geometry", views * BYTES_PER_VIEW, f"[geometry] num_views = {views}", "use fewer views"),
+        meshes,
+        Part(f"mount of {mounted} triangles", mounted * BYTES_PER_SCENE_TRIANGLE, "[[mount]] mesh", "use coarser meshes"),
+        Part(f"a batch of {batch_views} views", min(views, batch_views) * rows * cols * BYTES_PER_BATCH_PIXEL,
+             f"[geometry] detector_shape = {[rows, cols]}", "use fewer detector pixels"),
+        Part("float32 volume", voxels * 4, shape, grid_fix),
+        Part("labels", voxels, shape, grid_fix),
+    )
+    seconds = (meshing + views * seconds_per_view(rows * cols, triangles)
+               + views * voxels * SECONDS_PER_VOXEL_VIEW + voxels * SECONDS_PER_VOXEL_LABEL)
+    return Estimate(f"scan of {views} views into {nz}×{ny}×{nx} voxels", seconds, parts)
+
+
+def check_scan(loaded: ScanFile, batch_views: int) -> Estimate:
+    """:func:`scan_estimate`, refused (ConfigError naming the file, the table and the key) when it cannot fit."""
+    estimate = scan_estimate(loaded, batch_views)
+    estimate.check(ConfigError, f"{loaded.path} ")
+    return estimate
