@@ -65,23 +65,43 @@ def _alive(pid: int) -> bool:
 def stale_temporaries(path) -> list[Path]:
     """The temporaries of ``path`` left by dead writers on this host (module docstring)."""
     path = Path(path)
-    pattern = _temporary_pattern(path)
+    return _stale(path.parent, _temporary_pattern(path))
+
+
+def remove_stale_temporaries(path) -> list[Path]:
+    """Remove :func:`stale_temporaries` of ``path``; returns those removed."""
+    return _remove_temporaries(stale_temporaries(path))
+
+
+def remove_stale_temporaries_in(directory) -> list[Path]:
+    """Remove the stale temporaries of every output in ``directory``, not only one name's: what a
+    killed pool of writers leaves, e.g. a dataset's half-built samples (the rule of
+    :func:`stale_temporaries`)."""
+    return _remove_temporaries(_stale(directory, _ANY_TEMPORARY))
+
+
+# Any output's temporary: .NAME.<host>.<pid>.<random>[.suffix]
+_ANY_TEMPORARY = re.compile(rf"\..+\.{HOST_TAG}\.(\d+)\.[A-Za-z0-9_]+(\.[A-Za-z0-9]+)?")
+
+
+def _stale(directory, pattern: re.Pattern) -> list[Path]:
+    """The entries of ``directory`` that ``pattern`` (group 1: the writer's pid) names as
+    temporaries of a writer on this host that no longer exists."""
     try:
-        names = os.listdir(path.parent)
+        names = os.listdir(directory)
     except OSError:
         return []
     stale = []
     for name in names:
         match = pattern.fullmatch(name)
         if match and int(match.group(1)) != os.getpid() and not _alive(int(match.group(1))):
-            stale.append(path.parent / name)
+            stale.append(Path(directory) / name)
     return sorted(stale)
 
 
-def remove_stale_temporaries(path) -> list[Path]:
-    """Remove :func:`stale_temporaries` of ``path``; returns those removed."""
+def _remove_temporaries(paths) -> list[Path]:
     removed = []
-    for tmp in stale_temporaries(path):
+    for tmp in paths:
         try:
             if tmp.is_dir() and not tmp.is_symlink():
                 shutil.rmtree(tmp)  # an atomic_directory's

@@ -12,7 +12,7 @@ import importlib.metadata
 import json
 import resource
 import time
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,12 +22,14 @@ from ..core.files import atomic_directory, atomic_write, atomic_write_text, chec
 from ..core.projections import Projections
 from ..core.provenance import package_version
 from ..core.tiff import png_text, quicklook_factor, quicklook_path
+from ..gl.context import GLContext
 from ..gl.voxelize import LabelVolume, voxelize
 from ..physics.detector import Detector
 from ..physics.starvation import refuse_if_starved, starved_share, warn_if_starved
 from ..recon.fdk import FDKStream, Volume
 from ..recon.opencl import CLContext
 from ..simulate.renderer import Renderer
+from ..weave.yarn import LABELS as WEAVE_LABELS
 from .plan import check_scan
 from .scan_file import ScanFile, load_scan_file
 
@@ -95,7 +97,8 @@ def check_scan_output(directory, *, overwrite: bool = False, projections: bool =
                                   names=output_names(projections))
 
 
-def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False, allow_starved: bool = False) -> ScanResult:
+def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False, allow_starved: bool = False,
+         gl: GLContext | None = None, cl: CLContext | None = None, threads: int | None = None) -> ScanResult:
     """Run the scan of a :class:`~xrayraster.pipeline.ScanFile` (or a scan file's path, loaded and
     checked first): sample → ``Renderer.project_all`` (line integrals of the sample and its mount,
     noise and realism as the file says) in batches, each fed to ``xr.FDKStream`` on the file's grid
@@ -110,7 +113,11 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False, a
     ``metadata["projections"]["starved_share"]`` records it.
 
     Before any work, a scan that cannot fit in memory is refused (ConfigError naming the key), and
-    with ``progress=True`` the estimate of a long one is printed on stderr (:mod:`.plan`)."""
+    with ``progress=True`` the estimate of a long one is printed on stderr (:mod:`.plan`).
+
+    ``gl``, ``cl``: contexts to reuse (a dataset worker keeps its own across samples: made once,
+    they save their set-up and compiled kernels; each scan makes and closes its own otherwise).
+    ``threads``: the spectral sum's thread count (default every core; a worker of a pool its share)."""
     loaded = scan_file_or_path if isinstance(scan_file_or_path, ScanFile) else load_scan_file(scan_file_or_path)
     estimate = check_scan(loaded, BATCH_VIEWS)
     if progress is True:
@@ -122,7 +129,8 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False, a
     # A woven sample's yarns interpenetrate (docs/weave.md), so its renderer resolves overlaps by
     # priority without first searching the meshes for them (seconds at a million triangles).
     overlap = "resolve" if loaded.weave is not None else "auto"
-    with Renderer(loaded.geometry, overlap=overlap) as renderer, CLContext() as cl:
+    with Renderer(loaded.geometry, overlap=overlap, context=gl, threads=threads) as renderer, \
+            (nullcontext(cl) if cl is not None else CLContext()) as cl:
         with _timed(seconds, "fdk"):
             stream = FDKStream(loaded.geometry, loaded.volume, filter=options.filter, truncation=options.truncation,
                                truncation_width=options.truncation_width, context=cl, batch_views=BATCH_VIEWS)
@@ -151,6 +159,7 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False, a
         "options": options.to_dict(),
         "seed": options.seed,
         "sample": loaded.weave_report or _objects_report(scene),
+        "labels": label_names(scene, woven=loaded.weave is not None),
         "mesh_resolution": loaded.mesh_resolution,
         "triangles": scene.num_triangles,
         "projections": {"batch_views": stream.batch_views, "bins_used": max(provenance["bins_used"]),
@@ -240,6 +249,20 @@ def _version(name: str) -> str | None:
         return importlib.metadata.version(name)
     except importlib.metadata.PackageNotFoundError:
         return None
+
+
+def label_names(scene, *, woven: bool) -> dict[str, str]:
+    """Each label value of the label volume (as a string, JSON's key type) → its name: 0 "air"; a
+    woven sample's families by name (1 matrix, 2 weft, 3 warp, whatever its yarns are called) and a
+    tracer with a label of its own by its yarn's name; an object by its name (several objects
+    sharing a label: their names joined by "+")."""
+    families = {label: family for family, label in WEAVE_LABELS.items()} if woven else {}
+    names: dict[int, list[str]] = {}
+    for o in scene.objects:
+        name = families.get(o.label, o.name)
+        if name not in names.setdefault(o.label, []):
+            names[o.label].append(name)
+    return {"0": "air", **{str(label): "+".join(names[label]) for label in sorted(names)}}
 
 
 def _objects_report(scene) -> dict:

@@ -1,0 +1,334 @@
+"""``xr.build``: a dataset of randomised, labelled tomograms from a dataset file (docs/dataset.md).
+
+Each sample is ``xr.scan`` of one drawn scan table (:func:`~.dataset_file.draw`: the master seed
+and the sample's index decide it, nothing else), written in the dataset's layout
+(:mod:`.dataset_layout`) under a temporary name and moved into place when complete. So a build can
+be killed at any moment and rerun: finished samples are skipped, partial ones (hidden
+temporaries) removed and redone, and the files are the same bytes as an uninterrupted build's,
+with one worker or many, on a process pool or on Dask.
+
+The directory's record, ``build.json``, holds the dataset's fingerprint (everything that decides
+the samples but their count): a rerun against a changed dataset file is refused, naming what
+changed, unless ``force`` (which removes this build's samples first, never anything else); a
+larger ``count`` only adds samples. Sample files hold nothing that varies between runs (no wall
+times, no memory peaks): those go to the log, one line a sample.
+
+Workers: ``workers`` processes of a local pool (spawned, each with its own GL and OpenCL contexts
+kept across its samples, ``cores / workers`` threads each), or Dask distributed (``dask=True``: a
+``LocalCluster`` of processes; ``scheduler``: an existing cluster's address, whose workers write
+straight into ``directory`` on a shared file system). A sample that fails is retried once, then
+written to ``failed.csv`` with its drawn values and the error.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import logging
+import os
+import shutil
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..core.errors import ConfigError, XrayrasterError
+from ..core.files import atomic_write_text, probe_writable, remove_stale_temporaries_in
+from ..core.ownership import FILE_SUFFIXES, resolved_output
+from ..core.provenance import package_version
+from .dataset_file import DatasetFile, differences, draw, fingerprint, load_dataset_file, plan_rows
+from .dataset_layout import LAYOUTS
+
+__all__ = ["BuildReport", "build", "build_sample"]
+
+log = logging.getLogger(__name__)
+
+GENERATOR = "xrayraster build"
+RECORD_NAME, FAILED_NAME = "build.json", "failed.csv"
+# Keys of a scan's metadata that differ between two runs of the same sample: kept out of its files.
+VOLATILE = ("seconds", "peak_rss_mib")
+RETRIES = 1
+
+
+@dataclass(frozen=True)
+class BuildReport:
+    """What a build did: ``built`` (indices made now), ``skipped`` (finished before), ``failed``
+    (index → one-line error, after its retry), ``seconds`` (wall time) and ``directory``."""
+
+    directory: Path
+    built: tuple[int, ...]
+    skipped: int
+    failed: dict[int, str] = field(default_factory=dict)
+    seconds: float = 0.0
+
+
+def build(config, directory, *, workers: int = 1, dask: bool = False, scheduler: str | None = None,
+          force: bool = False, progress: bool = False) -> BuildReport:
+    """Build the dataset of ``config`` (a dataset file's path, its parsed table, or a
+    :class:`~.dataset_file.DatasetFile`) into ``directory`` (module docstring). ``progress``: a
+    bar with ETA and samples per hour on stderr. Returns a :class:`BuildReport`."""
+    dataset = config if isinstance(config, DatasetFile) else load_dataset_file(config)
+    if workers < 1 or int(workers) != workers:
+        raise ConfigError(f"workers must be a whole number >= 1, got {workers!r}")
+    root = _prepare(dataset, directory, force)
+    layout = LAYOUTS[dataset.layout]
+    for folder in [root, *(p for p in root.rglob("*") if p.is_dir() and not p.name.startswith("."))]:
+        remove_stale_temporaries_in(folder)  # what a killed build left
+    finished = layout.finished(root, dataset.name)
+    todo = [i for i in range(dataset.count) if i not in finished]
+    _check_disk(dataset, root, todo)
+    start = time.perf_counter()
+    built, failed = [], {}
+    try:
+        for summary in _run(dataset, root, todo, workers=workers, dask=dask, scheduler=scheduler,
+                            progress=progress):
+            if "error" in summary:
+                failed[summary["index"]] = summary["error"]
+                log.warning("sample %05d failed twice: %s", summary["index"], summary["error"])
+            else:
+                built.append(summary["index"])
+                log.info("sample %05d  seed %d  %.1f s  %s", summary["index"], summary["seed"], summary["seconds"],
+                         "  ".join(f"{k} {v:.3f}" for k, v in summary["class_fractions"].items()))
+    finally:
+        for folder in [root, *(p for p in root.rglob("*") if p.is_dir() and not p.name.startswith("."))]:
+            remove_stale_temporaries_in(folder)  # the pool's, when it was stopped
+        records = layout.finished(root, dataset.name)
+        layout.write_index(root, records, name=dataset.name, labels=_labels(records))
+        _write_failed(root, dataset, failed)
+    return BuildReport(root, tuple(sorted(built)), dataset.count - len(todo), failed,
+                       round(time.perf_counter() - start, 3))
+
+
+def build_sample(dataset: DatasetFile, root, index: int, threads: int | None = None) -> dict:
+    """Draw, scan and write sample ``index`` (the work of one task, in whichever process runs it);
+    returns a summary for the log: index, seed, seconds, class fractions."""
+    from ..recon.opencl import CLContext  # noqa: F401  (imported by the worker's contexts)
+
+    start = time.perf_counter()
+    drawn = draw(dataset, index)
+    for reason in drawn.redraws:
+        log.info("sample %05d redrawn: %s", index, reason)
+    gl, cl = _worker_contexts()
+    from .scan import scan
+
+    result = scan(drawn.scan, gl=gl, cl=cl, threads=threads)
+    fractions = class_fractions(result.labels.data, result.metadata["labels"])
+    record = {"generator": GENERATOR, "index": index, "seed": drawn.seed, "split": drawn.split,
+              "values": drawn.values, "attempts": drawn.attempts, "class_fractions": fractions}
+    metadata = {k: v for k, v in result.metadata.items() if k not in VOLATILE}
+    LAYOUTS[dataset.layout].write_sample(Path(root), index, _with_metadata(result, metadata), record,
+                                         name=dataset.name)
+    return {"index": index, "seed": drawn.seed, "seconds": time.perf_counter() - start,
+            "class_fractions": fractions}
+
+
+def class_fractions(labels: np.ndarray, names: dict[str, str]) -> dict[str, float]:
+    """The share of the volume's voxels each label takes, by label name (``names``: value → name)."""
+    counts = np.bincount(labels.ravel(), minlength=max(int(k) for k in names) + 1)
+    return {name: round(float(counts[int(k)]) / labels.size, 6) for k, name in names.items()}
+
+
+# -- the directory -----------------------------------------------------------------------------
+
+
+def _prepare(dataset: DatasetFile, directory, force: bool) -> Path:
+    """The dataset directory, checked and recorded before any work (module docstring)."""
+    path = Path(directory)
+    if path.suffix.lower() in FILE_SUFFIXES:
+        raise ConfigError(f"{path}: a build writes a directory, and this name ends in {path.suffix} like a file; "
+                          f"give a directory name such as {path.with_suffix('')}")
+    root = resolved_output(path)
+    probe_writable(root.parent, path)
+    record = {"generator": GENERATOR, "version": package_version(), "fingerprint": fingerprint(dataset),
+              "count": dataset.count, "layout": dataset.layout, "dataset": dataset.to_dict()}
+    if root.is_dir() and any(root.iterdir()):
+        earlier = _read_record(root)
+        if earlier is None:
+            raise ConfigError(f"{path} holds files that {GENERATOR} did not write (no {RECORD_NAME}); they are never "
+                              "removed: choose another directory")
+        changed = differences(DatasetFile.from_dict(earlier["dataset"]), dataset) if \
+            earlier["fingerprint"] != record["fingerprint"] else []
+        if earlier["count"] > dataset.count:
+            changed.append(f"count {earlier['count']} -> {dataset.count} (only growing is resumed)")
+        if changed and not force:
+            raise ConfigError(f"{path} holds a build of another dataset file ({'; '.join(changed)}); rerun with the "
+                              "same file (count may grow), choose another directory, or pass --force to remove this "
+                              "build's samples and start again")
+        if changed:
+            _remove_samples(root, DatasetFile.from_dict(earlier["dataset"]))
+    elif root.exists() and not root.is_dir():
+        raise ConfigError(f"{path} is a file, not a directory; choose another name")
+    root.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(root / RECORD_NAME, json.dumps(record, indent=2) + "\n")
+    return root
+
+
+def _read_record(root: Path) -> dict | None:
+    try:
+        record = json.loads((root / RECORD_NAME).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return record if isinstance(record, dict) and record.get("generator") == GENERATOR else None
+
+
+def _remove_samples(root: Path, earlier: DatasetFile) -> None:
+    """Remove the samples of an earlier build (the files its layout names, nothing else)."""
+    layout = LAYOUTS[earlier.layout]
+    for index, record in layout.finished(root, earlier.name).items():
+        for relative in layout.sample_paths(index, record["split"], earlier.name):
+            target = root / relative
+            if target.is_dir():
+                shutil.rmtree(target)
+            else:
+                target.unlink(missing_ok=True)
+
+
+def _check_disk(dataset: DatasetFile, root: Path, todo: list[int]) -> None:
+    """Refuse a build whose remaining samples cannot fit on the disk, before the first sample."""
+    if not todo:
+        return
+    rows = plan_rows(dataset, indices=todo[:1])
+    needed = rows[0]["disk_bytes"] * len(todo)
+    free = shutil.disk_usage(root).free
+    if needed > free:
+        raise ConfigError(f"{root}: {len(todo)} samples need about {needed / 2**30:.1f} GiB and the disk has "
+                          f"{free / 2**30:.1f} GiB free; free space, choose another disk, or lower [dataset] count")
+
+
+def _labels(records: dict[int, dict]) -> dict[int, str]:
+    names: dict[int, str] = {}
+    for record in records.values():
+        for key, name in record.get("labels", {}).items():
+            names.setdefault(int(key), name)
+    return dict(sorted(names.items()))
+
+
+def _write_failed(root: Path, dataset: DatasetFile, failed: dict[int, str]) -> None:
+    path = root / FAILED_NAME
+    if not failed:
+        path.unlink(missing_ok=True)
+        return
+    text = io.StringIO()
+    writer = csv.writer(text)
+    writer.writerow(["index", "seed", "values", "error"])
+    for index in sorted(failed):
+        drawn = draw(dataset, index)
+        writer.writerow([index, drawn.seed, json.dumps(drawn.values, sort_keys=True), failed[index]])
+    atomic_write_text(path, text.getvalue())
+
+
+# -- running the samples -----------------------------------------------------------------------
+
+
+def _run(dataset, root, todo, *, workers, dask, scheduler, progress):
+    """Summaries of the samples of ``todo`` as they finish (errors as ``{"index", "error"}``)."""
+    if not todo:
+        return
+    bar = _bar(len(todo)) if progress else None
+    try:
+        if dask or scheduler:
+            runs = _on_dask(dataset, root, todo, workers, scheduler)
+        elif workers > 1:
+            runs = _on_pool(dataset, root, todo, workers)
+        else:
+            runs = (_attempt(dataset, root, index, None) for index in todo)
+        for summary in runs:
+            if bar is not None:
+                bar.update()
+                hours = bar.format_dict["elapsed"] / 3600
+                bar.set_postfix_str(f"{bar.n / hours:.0f} samples/h" if hours else "")
+            yield summary
+    finally:
+        if bar is not None:
+            bar.close()
+
+
+def _attempt(dataset, root, index, threads) -> dict:
+    """Sample ``index``, retried once; an error after that is returned, not raised."""
+    for attempt in range(RETRIES + 1):
+        try:
+            return build_sample(dataset, root, index, threads)
+        except (XrayrasterError, OSError, RuntimeError, ValueError) as exc:
+            error = f"{type(exc).__name__}: {' '.join(str(exc).split())}"
+            log.info("sample %05d, attempt %d: %s", index, attempt + 1, error)
+    return {"index": index, "error": error}
+
+
+def _on_pool(dataset, root, todo, workers):
+    import multiprocessing
+
+    threads = max(1, (os.cpu_count() or 1) // workers)
+    context = multiprocessing.get_context("spawn")  # GL and OpenCL state does not survive a fork
+    pool = context.Pool(workers, initializer=_init_worker, initargs=(threads,), maxtasksperchild=None)
+    try:
+        pending = [pool.apply_async(_attempt, (dataset, root, index, threads)) for index in todo]
+        while pending:
+            done = [p for p in pending if p.ready()]
+            for p in done:
+                pending.remove(p)
+                yield p.get()
+            if not done:
+                time.sleep(0.05)
+        pool.close()
+    finally:
+        pool.terminate()  # on Ctrl-C or an error: the workers stop now; their temporaries are stale
+        pool.join()
+
+
+def _on_dask(dataset, root, todo, workers, scheduler):
+    try:
+        from distributed import Client, LocalCluster, as_completed
+    except ImportError:
+        raise ConfigError("building on Dask needs the dask extra: pip install \"xrayraster[dask]\"") from None
+    threads = max(1, (os.cpu_count() or 1) // workers)
+    cluster = None if scheduler else LocalCluster(n_workers=workers, threads_per_worker=1, processes=True)
+    client = Client(scheduler or cluster)
+    try:
+        futures = [client.submit(_attempt, dataset, str(root), index, threads, key=f"xrayraster-sample-{index}",
+                                 pure=False) for index in todo]
+        for future in as_completed(futures):
+            yield future.result()
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+# One process's contexts, made on its first sample and kept for the rest (a worker of a pool or
+# of Dask scans many samples; making them costs a second, compiling the kernels more).
+_contexts = None
+
+
+def _init_worker(threads: int) -> None:
+    """A pool worker: Ctrl-C is the parent's to handle; GL's and OpenCL's CPU threads its share."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    os.environ.setdefault("LP_NUM_THREADS", str(threads))  # llvmpipe's rasteriser threads
+    os.environ.setdefault("POCL_MAX_PTHREAD_COUNT", str(threads))  # PoCL's CPU device
+
+
+def _worker_contexts():
+    global _contexts
+    if _contexts is None:
+        from ..gl.context import GLContext
+        from ..recon.opencl import CLContext
+
+        _contexts = (GLContext(), CLContext())
+    return _contexts
+
+
+def _with_metadata(result, metadata: dict):
+    import dataclasses
+
+    return dataclasses.replace(result, metadata=metadata)
+
+
+def _bar(total: int):
+    import sys
+
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc="samples", unit="sample", file=sys.stderr)
