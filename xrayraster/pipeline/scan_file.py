@@ -13,6 +13,8 @@ and ``[detector]``, as in scene files. A weave sample's
 as there: its box centred on the rotation axis, its thickness along z. The default ``[volume]`` is
 the grid over the sample's box (the objects' bounds) at the scan's magnified pixel pitch. Every
 check runs on loading, before any meshing or rendering, and names the file, the table and the key.
+``[pose]`` (:class:`~.pose.Pose`) turns and moves the sample, not the mount, before the box, the
+default ``[geometry]`` of a weave and the default ``[volume]`` are taken from it.
 """
 
 from __future__ import annotations
@@ -38,10 +40,11 @@ from ..recon.truncation import DEFAULT_WIDTH
 from ..scene.materials import Material
 from ..scene.scene import Scene
 from ..weave.tessellation import resolution_for
+from .pose import Pose
 
 __all__ = ["ScanFile", "ScanOptions", "load_scan_file", "mesh_resolution_for"]
 
-_TABLES = {"geometry", "objects", "weave", "mount", "materials", "source", "detector", "volume", "scan"}
+_TABLES = {"geometry", "objects", "weave", "mount", "materials", "source", "detector", "volume", "scan", "pose"}
 
 
 @dataclass(frozen=True)
@@ -97,9 +100,10 @@ class ScanOptions:
 class ScanFile:
     """A loaded scan file. The sample is ``scene`` (from ``[[objects]]``) or ``weave`` (from
     ``[weave]``, meshed by :meth:`sample_scene`); the other is None. ``box_mm``: the sample's
-    ``(2, 3)`` min/max corners in the scanner frame (a weave's as placed there). ``realism``: the
+    ``(2, 3)`` min/max corners in the scanner frame (a weave's as placed there), posed. ``realism``: the
     scanner's imperfections; ``mount``: the ``[[mount]]`` objects (None without), which
-    :meth:`with_mount` adds to the sample for the projections."""
+    :meth:`with_mount` adds to the sample for the projections; ``pose``: the ``[pose]`` (the objects
+    of ``scene`` are posed already, a weave is posed by :meth:`sample_scene`)."""
 
     path: Path
     scene: Scene | None
@@ -113,14 +117,16 @@ class ScanFile:
     mesh_resolution: dict | None = None  # a weave's knobs, and whether the grid chose them (mesh_resolution_for)
     realism: Realism = Realism()
     mount: Scene | None = None
+    pose: Pose = Pose()
 
     def sample_scene(self, progress: bool = False) -> Scene:
-        """The scene to scan: the objects, or the weave meshed and moved so its box is centred on the axis."""
+        """The scene to scan: the objects, or the weave meshed and moved so its box is centred on the
+        axis; posed either way."""
         if self.weave is None:
             return self.scene
         lo, hi = self.weave.sample.box
-        return self.weave.sample.scene(self.weave.materials, transform=Transform.translation(-(lo + hi) / 2),
-                                       progress=progress)
+        centred = self.pose.transform @ Transform.translation(-(lo + hi) / 2)
+        return self.weave.sample.scene(self.weave.materials, transform=centred, progress=progress)
 
     def with_mount(self, sample: Scene) -> Scene:
         """What the projections see: ``sample`` (from :meth:`sample_scene`, which the labels are made
@@ -165,6 +171,7 @@ def load_scan_file(path) -> ScanFile:
     options = ScanOptions.from_dict(fields.table(data.get("scan", {}), "scan", f"{path}"), f"{path} [scan]")
     volume = VolumeGeometry.from_dict(data["volume"], f"{path} [volume]") if "volume" in data else None
     materials = _materials(data["materials"], f"{path} [materials]") if "materials" in data else None
+    pose = Pose.from_dict(fields.table(data["pose"], "pose", f"{path}"), f"{path} [pose]") if "pose" in data else Pose()
     geometry = None
     if "geometry" in data:
         geometry = _geometry(fields.table(data["geometry"], "geometry", f"{path}"), f"{path} [geometry]")
@@ -173,11 +180,16 @@ def load_scan_file(path) -> ScanFile:
         weave = WeaveFile(path, *weave_from_dict(data["weave"], materials or {}, f"{path} [weave]"))
         lo, hi = weave.sample.box
         box = np.stack([lo, hi]) - (lo + hi) / 2
-        geometry = geometry or framing_geometry(box)
+        pose = pose.about(np.zeros(3))
+        box = pose.box(box)
+        # The framing sees a box centred on the axis: the smallest such box around the posed one.
+        geometry = geometry or framing_geometry(np.abs(box).max(axis=0) * [[-1], [1]])
     else:
         if geometry is None:
             raise ConfigError(f"{path}: missing [geometry] table (needed with [[objects]]; a [weave] sample frames itself)")
         scene, materials = _objects(data["objects"], path, materials)
+        pose = pose.about(scene.bounds.mean(axis=0))
+        scene = pose.place(scene)
         box = scene.bounds
     mount = None
     if "mount" in data:
@@ -195,7 +207,7 @@ def load_scan_file(path) -> ScanFile:
                  for k in ("points_per_section", "samples_per_mm")}
         weave, resolution = mesh_resolution_for(weave, volume, options.mesh_tolerance_voxels, given)
     return ScanFile(path, scene, weave, np.asarray(box, dtype=np.float64), geometry, volume, spectrum, detector,
-                    options, resolution, _realism(data, geometry, path), mount)
+                    options, resolution, _realism(data, geometry, path), mount, pose)
 
 
 def mesh_resolution_for(weave: WeaveFile, volume: VolumeGeometry, tolerance_voxels: float,
