@@ -6,6 +6,7 @@ The scans are tiny (60 views of 64 × 64 pixels, 48³ voxels of 0.2 mm, monochro
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 from pathlib import Path
@@ -236,3 +237,23 @@ def test_a_pose_table_must_be_a_table(tmp_path):
     path.write_text("pose = 3\n" + path.read_text())
     with pytest.raises(ConfigError, match="pose must be a table"):
         load_scan_file(path)
+
+
+def test_the_mount_stays_put(tmp_path):
+    mount = '[[mount]]\nmesh = { box = [8.0, 8.0, 1.0] }\nmaterial = "aluminium"\ntranslate = [0.0, 0.0, -2.0]\n'
+    loaded = load_scan_file(write(tmp_path, "mounted", grid="", pose=mount + "[pose]\noffset_mm = [0, 0, 1]\n"))
+    assert np.allclose(loaded.mount.bounds, [[-4.0, -4.0, -2.5], [4.0, 4.0, -1.5]])
+    assert np.allclose(loaded.box_mm[:, 2], [0.0 - 0.05, 2.05])  # the block's 2.1 mm, raised 1 mm
+    scanned = loaded.with_mount(loaded.sample_scene())
+    assert np.allclose(scanned.bounds, [[-4.0, -4.0, -2.5], [4.0, 4.0, 2.05]])
+
+
+def test_a_posed_weave_scans_and_records_its_pose(gl, cl):
+    loaded = load_scan_file(EXAMPLE)
+    posed = dataclasses.replace(loaded, pose=Pose(tilt_deg=(0.0, 0.0, 45.0)))
+    result = xr.scan(posed)
+    assert result.metadata["pose"] == {"offset_mm": [0.0, 0.0, 0.0], "tilt_deg": [0.0, 0.0, 45.0],
+                                       "pivot_mm": [0.0, 0.0, 0.0]}
+    labels = result.labels.data > 0
+    corner, vertex = labels[12, 1, 1], labels[12, 32, 2]  # turned 45°: no corner, a vertex on -x
+    assert not corner and vertex
