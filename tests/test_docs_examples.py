@@ -148,16 +148,19 @@ def test_toml_scene_renders_every_material(doc, line, text, expect, tmp_path, gl
 
 
 def test_bundled_examples_are_quoted_verbatim_in_the_format_reference():
-    """Scene files in docs/scene-format.md (loaded there as toml blocks); weave files in docs/weave.md
-    and woven scan files (a [weave] and a [source]) in docs/scan.md or, the twin's, docs/twin.md, as
-    text blocks."""
+    """Scene files in docs/scene-format.md (loaded there as toml blocks); weave files in docs/weave.md,
+    woven scan files (a [weave] and a [source]) in docs/scan.md or, the twin's, docs/twin.md, and
+    dataset files (a [dataset]) in docs/dataset.md, as text blocks."""
     quoted = {text.strip() for doc, _, text, _ in TOML if doc.name == "scene-format.md"}
     examples = sorted((ROOT / "examples").glob("*.toml"))
     assert examples
     for example in examples:
         text = example.read_text().strip()
         data = tomllib.loads(text)
-        if "weave" in data:
+        if "dataset" in data:
+            assert f"```text\n{text}\n```" in (ROOT / "docs" / "dataset.md").read_text(), \
+                f"{example.name} differs from its copy in docs/dataset.md"
+        elif "weave" in data:
             docs = ("scan.md", "twin.md") if "source" in data else ("weave.md",)
             assert any(f"```text\n{text}\n```" in (ROOT / "docs" / doc).read_text() for doc in docs), \
                 f"{example.name} differs from its copy in docs/{' or docs/'.join(docs)}"

@@ -20,6 +20,7 @@ default ``[geometry]`` of a weave and the default ``[volume]`` are taken from it
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -105,7 +106,7 @@ class ScanFile:
     :meth:`with_mount` adds to the sample for the projections; ``pose``: the ``[pose]`` (the objects
     of ``scene`` are posed already, a weave is posed by :meth:`sample_scene`)."""
 
-    path: Path
+    path: Path | str  # the file, or the ``where`` name of a table loaded from a dict
     scene: Scene | None
     weave: WeaveFile | None
     box_mm: np.ndarray
@@ -157,10 +158,16 @@ class ScanFile:
                 "tracers": [t.yarn for t in self.weave.materials.tracers]}
 
 
-def load_scan_file(path) -> ScanFile:
-    """Read and check a scan file (module docstring); errors are ConfigErrors naming the file, table and key."""
-    path = Path(path)
-    data = read_toml(path, "scan file")
+def load_scan_file(source, *, where: str = "scan table", base_dir=None) -> ScanFile:
+    """Read and check a scan file (module docstring), or the dict of one already parsed (TOML's tables
+    as dicts, e.g. a dataset's drawn table): then ``where`` names it in messages and as the result's
+    ``path``, and relative file paths (meshes, spectrum files) are relative to ``base_dir`` (default:
+    the current directory). Errors are ConfigErrors naming the file (or ``where``), table and key."""
+    if isinstance(source, Mapping):
+        path, data, base = where, source, Path(base_dir if base_dir is not None else ".")
+    else:
+        path = Path(source)
+        data, base = read_toml(path, "scan file"), path.parent
     fields.only(data, _TABLES, f"{path}")
     has_objects, has_weave = "objects" in data, "weave" in data
     if has_objects == has_weave:
@@ -187,14 +194,14 @@ def load_scan_file(path) -> ScanFile:
     else:
         if geometry is None:
             raise ConfigError(f"{path}: missing [geometry] table (needed with [[objects]]; a [weave] sample frames itself)")
-        scene, materials = _objects(data["objects"], path, materials)
+        scene, materials = _objects(data["objects"], path, base, materials)
         pose = pose.about(scene.bounds.mean(axis=0))
         scene = pose.place(scene)
         box = scene.bounds
     mount = None
     if "mount" in data:
-        mount, materials = _mount(data["mount"], path, materials, scene)
-    spectrum = _source(fields.table(data["source"], "source", f"{path}"), path.parent, f"{path} [source]")
+        mount, materials = _mount(data["mount"], path, base, materials, scene)
+    spectrum = _source(fields.table(data["source"], "source", f"{path}"), base, f"{path} [source]")
     detector = None
     if "detector" in data:
         detector = _detector(fields.table(data["detector"], "detector", f"{path}"), materials, f"{path} [detector]")
@@ -226,7 +233,7 @@ def mesh_resolution_for(weave: WeaveFile, volume: VolumeGeometry, tolerance_voxe
     return dataclasses.replace(weave, sample=dataclasses.replace(sample, **knobs)), record
 
 
-def _objects(objects, path: Path, materials: dict | None) -> tuple[Scene, dict]:
+def _objects(objects, path: Path | str, base: Path, materials: dict | None) -> tuple[Scene, dict]:
     """The ``[[objects]]`` as load_scene_file reads them; every material must resolve (a scan makes radiographs)."""
     if not isinstance(objects, list) or not objects:
         raise ConfigError(f"{path}: objects must be a non-empty array of tables ([[objects]]), got {objects!r}")
@@ -234,11 +241,11 @@ def _objects(objects, path: Path, materials: dict | None) -> tuple[Scene, dict]:
     library: dict[str, Material] = {}
     for k, spec in enumerate(objects):
         where = f"{path} [[objects]] #{k + 1}"
-        _add_object(scene, fields.table(spec, "objects", where), path.parent, where, materials or {}, library)
+        _add_object(scene, fields.table(spec, "objects", where), base, where, materials or {}, library)
     return scene, {**library, **(materials or {})}
 
 
-def _mount(mounts, path: Path, materials: dict | None, sample: Scene | None) -> tuple[Scene, dict]:
+def _mount(mounts, path: Path | str, base: Path, materials: dict | None, sample: Scene | None) -> tuple[Scene, dict]:
     """The ``[[mount]]`` tables: objects as in ``[[objects]]``, without a label or a priority (a
     mount is never labelled, and the sample owns any space it shares with one). Named ``mountK``
     unless named; a name an ``[[objects]]`` entry has is an error."""
@@ -259,5 +266,5 @@ def _mount(mounts, path: Path, materials: dict | None, sample: Scene | None) -> 
         if spec["name"] in taken:
             raise ConfigError(f"{where}: name {spec['name']!r} is taken by an [[objects]] entry; give the mount "
                               "another name")
-        _add_object(scene, spec, path.parent, where, materials or {}, library)
+        _add_object(scene, spec, base, where, materials or {}, library)
     return scene, {**library, **(materials or {})}
