@@ -8,11 +8,13 @@ from __future__ import annotations
 import csv
 import json
 import math
+import multiprocessing
 import os
 import signal
 import subprocess
 import sys
 import time
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -252,6 +254,21 @@ def test_killed_writer_leaves_nothing_visible_and_rerun_cleans_up(tmp_path, layo
 
     LAYOUTS[layout].write_sample(tmp_path, 1, result(), record(1, "val"), name=NAME)
     assert sorted(LAYOUTS[layout].finished(tmp_path, NAME)) == [1]
+    assert not [e for e in all_entries(tmp_path) if any(part.startswith(".") for part in Path(e).parts)]
+
+
+def write_one(layout: str, root: str, index: int) -> None:
+    LAYOUTS[layout].write_sample(Path(root), index, result(seed=index), record(index, SPLITS[index % 3]), name=NAME)
+
+
+def test_workers_writing_at_once(tmp_path):
+    """Two worker processes write the samples of every layout into one new root at the same time
+    (the first two race to create the shared folders)."""
+    jobs = [(layout, str(tmp_path / layout), index) for index in range(6) for layout in sorted(LAYOUTS)]
+    with ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("fork")) as pool:
+        list(pool.map(write_one, *zip(*jobs)))
+    for layout in LAYOUTS:
+        assert sorted(LAYOUTS[layout].finished(tmp_path / layout, NAME)) == list(range(6))
     assert not [e for e in all_entries(tmp_path) if any(part.startswith(".") for part in Path(e).parts)]
 
 

@@ -165,6 +165,12 @@ def _visible(directory: Path, pattern: str) -> list[tuple[int, Path]]:
     return sorted((int(m.group(1)), directory / n) for n in names if (m := compiled.fullmatch(n)))
 
 
+def _make_parent(directory: Path) -> None:
+    """Create the parent of a sample's directory first: atomic_directory's write probe removes a
+    parent it had to create, which would pull it from under another worker starting at once."""
+    directory.parent.mkdir(parents=True, exist_ok=True)
+
+
 def _write_extras(directory: Path, projections, write_meshes) -> None:
     if projections is not None:
         projections.save(directory / PROJECTIONS_TIF, quicklook=False)
@@ -178,6 +184,7 @@ def _extras_directory(path: Path, stored: dict, projections, write_meshes) -> No
     whole before the sample's own files (so a complete sample's extras are complete too)."""
     if projections is None and write_meshes is None:
         return
+    _make_parent(path)
     with atomic_directory(path, marker=EXTRAS_JSON, generator=GENERATOR) as tmp:
         _write_extras(tmp, projections, write_meshes)
         atomic_write_text(tmp / EXTRAS_JSON, _json({"generator": GENERATOR, "index": stored["index"]}))
@@ -193,8 +200,9 @@ class TiffLayout:
     def write_sample(self, root, index, result, record, *, name, projections=None, write_meshes=None) -> None:
         _check_name(name)
         stored = stored_record(index, result, record)
-        with atomic_directory(Path(root) / "samples" / sample_id(index), marker=SAMPLE_JSON,
-                              generator=GENERATOR) as tmp:
+        directory = Path(root) / "samples" / sample_id(index)
+        _make_parent(directory)
+        with atomic_directory(directory, marker=SAMPLE_JSON, generator=GENERATOR) as tmp:
             result.volume.save(tmp / VOLUME_TIF, quicklook=False)
             result.labels.save(tmp / LABELS_TIF, quicklook=False)
             _write_extras(tmp, projections, write_meshes)
