@@ -1,5 +1,6 @@
 """The documentation's examples work: every ```python block of README.md and docs/*.md runs, every
-```toml block loads through the scene loader (and renders), every ```json block loads as a scan
+```toml block loads through the scene loader (a scan file's, one with a table only scan files
+have, through the scan-file loader) and renders, every ```json block loads as a scan
 file, and the README's commands are the ones CI runs.
 
 Python blocks run one by one in a fresh namespace, with the working directory a temporary folder
@@ -90,6 +91,27 @@ def test_json_scan_file_loads(doc, line, text, expect, tmp_path):
     assert geometry is not None and geometry.num_views >= 1 and all(n >= 1 for n in volume.shape)
 
 
+# Tables a scan file has and a scene file has not (docs/scan.md).
+SCAN_TABLES = {"weave", "mount", "volume", "scan", "pose"}
+
+
+def _loader(text: str):
+    """The scan-file loader for a block with a scan file's table, else the scene loader."""
+    from xrayraster.io.scene_file import load_scene_file
+    from xrayraster.pipeline import load_scan_file
+
+    try:
+        tables = set(tomllib.loads(text))
+    except tomllib.TOMLDecodeError:
+        tables = set()  # a block showing a syntax error: the scene loader reports it
+    return load_scan_file if tables & SCAN_TABLES else load_scene_file
+
+
+def _scene(loaded):
+    """What a loaded scene or scan file scans."""
+    return loaded.with_mount(loaded.sample_scene()) if hasattr(loaded, "sample_scene") else loaded.scene
+
+
 def _write_scene(tmp_path: Path, text: str) -> Path:
     """The block as a file beside a ``meshes/`` link, so its relative mesh paths resolve as in examples/."""
     (tmp_path / "meshes").symlink_to(ROOT / "examples" / "meshes", target_is_directory=True)
@@ -100,43 +122,45 @@ def _write_scene(tmp_path: Path, text: str) -> Path:
 
 @pytest.mark.parametrize("doc, line, text, expect", _params(TOML))
 def test_toml_block_loads(doc, line, text, expect, tmp_path):
-    from xrayraster.io.scene_file import load_scene_file
-
     path = _write_scene(tmp_path, text)
+    load = _loader(text)
     if expect is not None:
         with pytest.raises(ValueError, match=expect):
-            load_scene_file(path)
+            load(path)
         return
-    loaded = load_scene_file(path)
-    assert len(loaded.scene) >= 1 and loaded.geometry.num_views >= 1
+    loaded = load(path)
+    assert len(_scene(loaded)) >= 1 and loaded.geometry.num_views >= 1
 
 
 @pytest.mark.parametrize("doc, line, text, expect", _params(SCENES))
 def test_toml_scene_renders_every_material(doc, line, text, expect, tmp_path, gl):
     """A documented scene that loads but shows nothing (object behind the source, off the detector) is broken too."""
     from xrayraster import Renderer
-    from xrayraster.io.scene_file import load_scene_file
 
-    loaded = load_scene_file(_write_scene(tmp_path, text))
+    loaded = _loader(text)(_write_scene(tmp_path, text))
+    scene = _scene(loaded)
     with Renderer(loaded.geometry, context=gl) as renderer:
-        lengths = renderer.path_lengths(loaded.scene, 0)
-    assert lengths.shape == (len(loaded.scene.materials), *loaded.geometry.detector_shape)
+        lengths = renderer.path_lengths(scene, 0)
+    assert lengths.shape == (len(scene.materials), *loaded.geometry.detector_shape)
     assert np.all(np.isfinite(lengths))
     visible = lengths.max(axis=(1, 2)) > 0
-    assert visible.all(), f"materials not in view 0: {[m for m, v in zip(loaded.scene.materials, visible) if not v]}"
+    assert visible.all(), f"materials not in view 0: {[m for m, v in zip(scene.materials, visible) if not v]}"
 
 
 def test_bundled_examples_are_quoted_verbatim_in_the_format_reference():
-    """Scene files in docs/scene-format.md (loaded there as toml blocks); weave files in docs/weave.md
-    and woven scan files (a [weave] and a [source]) in docs/scan.md or, the twin's, docs/twin.md, as
-    text blocks."""
+    """Scene files in docs/scene-format.md (loaded there as toml blocks); weave files in docs/weave.md,
+    woven scan files (a [weave] and a [source]) in docs/scan.md or, the twin's, docs/twin.md, and
+    dataset files (a [dataset]) in docs/dataset.md, as text blocks."""
     quoted = {text.strip() for doc, _, text, _ in TOML if doc.name == "scene-format.md"}
     examples = sorted((ROOT / "examples").glob("*.toml"))
     assert examples
     for example in examples:
         text = example.read_text().strip()
         data = tomllib.loads(text)
-        if "weave" in data:
+        if "dataset" in data:
+            assert f"```text\n{text}\n```" in (ROOT / "docs" / "dataset.md").read_text(), \
+                f"{example.name} differs from its copy in docs/dataset.md"
+        elif "weave" in data:
             docs = ("scan.md", "twin.md") if "source" in data else ("weave.md",)
             assert any(f"```text\n{text}\n```" in (ROOT / "docs" / doc).read_text() for doc in docs), \
                 f"{example.name} differs from its copy in docs/{' or docs/'.join(docs)}"

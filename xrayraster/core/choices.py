@@ -17,6 +17,9 @@ VOXELIZE_METHODS = ("exact", "stencil")
 MESH_FORMATS = ("stl", "ply")  # mesh files a woven sample is exported as
 WEAVE_RESOLVE = ("priority", "boolean")  # how overlapping yarns are settled
 EXPORT_PER = ("family", "yarn")  # one mesh file per yarn family or per yarn
+DATASET_LAYOUTS = ("tiff", "nnunet", "hdf5")  # how a dataset build lays out its samples
+DATASET_SPLITS = ("train", "val", "test")  # the parts a dataset's samples are split into, in draw order
+DATASET_KEEP = ("projections", "meshes")  # what a dataset build keeps beside each sample's volumes
 
 
 def is_switch(value) -> bool:

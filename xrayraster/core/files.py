@@ -119,19 +119,33 @@ def atomic_write(path, write) -> Path:
     The file gets the mode of a newly created file, :data:`NEW_FILE_MODE`. Stale temporaries of
     ``path`` (module docstring) are removed first.
     """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    remove_stale_temporaries(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.{HOST_TAG}.{os.getpid()}.", suffix=path.suffix)
-    os.close(fd)
+    return atomic_writes([(path, write)])[0]
+
+
+def atomic_writes(writes) -> list[Path]:
+    """:func:`atomic_write` for several files, ``writes`` being (path, write) pairs: every
+    temporary is written first, then they are renamed into place in the order given, so a failure
+    while writing leaves none of the files. (A kill during the renames, a few system calls, can
+    leave the first ones: a reader that needs all of them looks for the last.) Returns the paths."""
+    temporaries = []
     try:
-        write(tmp)
-        os.chmod(tmp, NEW_FILE_MODE)
-        os.replace(tmp, path)
+        for path, write in writes:
+            path = Path(path)
+            path.parent.mkdir(parents=True, exist_ok=True)
+            remove_stale_temporaries(path)
+            fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.{HOST_TAG}.{os.getpid()}.",
+                                       suffix=path.suffix)
+            os.close(fd)
+            temporaries.append((tmp, path))
+            write(tmp)
+            os.chmod(tmp, NEW_FILE_MODE)
+        for tmp, path in temporaries:
+            os.replace(tmp, path)
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        for tmp, _ in temporaries:
+            Path(tmp).unlink(missing_ok=True)
         raise
-    return path
+    return [path for _, path in temporaries]
 
 
 def atomic_write_text(path, text: str) -> Path:

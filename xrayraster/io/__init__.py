@@ -1,4 +1,5 @@
-"""Files: TOML scene files, JSON scan files, TIFF stacks and their metadata, quick-look PNGs."""
+"""Files: TOML scene files, JSON scan files, TIFF stacks and their metadata, quick-look PNGs, and the
+on-disk layouts of dataset builds (``dataset_layout``: TIFF, nnU-Net NIfTI, HDF5)."""
 
 from .tiff import (
     read_projections,

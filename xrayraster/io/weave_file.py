@@ -168,7 +168,9 @@ def sample_grid(box_mm, geometry: ConeBeamGeometry) -> VolumeGeometry:
     """Voxels over the (centred) box at the scan's magnified pixel pitch: the reconstruction's natural grid."""
     lo, hi = np.asarray(box_mm, dtype=np.float64)
     voxel = geometry.pixel_size[1] * geometry.source_to_origin / geometry.source_to_detector
-    shape = tuple(int(np.ceil((hi[i] - lo[i]) / voxel)) for i in (2, 1, 0))
+    # A box turned by a pose is a whole number of voxels only up to rounding (cos 90° = 6e-17): that
+    # must not add a voxel, so extents within 1e-9 voxel above a whole number round down.
+    shape = tuple(int(np.ceil((hi[i] - lo[i]) / voxel - 1e-9)) for i in (2, 1, 0))
     return VolumeGeometry(shape, voxel)
 
 

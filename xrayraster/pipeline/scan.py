@@ -171,6 +171,7 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False, a
                         "spectral_table": provenance.get("spectral_table")},
         "reconstruction": {key: volume.provenance[key] for key in RECONSTRUCTION_FACTS},
         "realism": loaded.realism.to_dict(),
+        "pose": loaded.pose.to_dict(),
         "mount": [{"name": o.name, "material": repr(o.material)}
                   for o in (loaded.mount.objects if loaded.mount is not None else ())],
         "units": {"volume": volume.unit, "lengths": "mm", "seconds": "s", "peak_rss": "MiB"},

@@ -13,11 +13,14 @@ and ``[detector]``, as in scene files. A weave sample's
 as there: its box centred on the rotation axis, its thickness along z. The default ``[volume]`` is
 the grid over the sample's box (the objects' bounds) at the scan's magnified pixel pitch. Every
 check runs on loading, before any meshing or rendering, and names the file, the table and the key.
+``[pose]`` (:class:`~.pose.Pose`) turns and moves the sample, not the mount, before the box, the
+default ``[geometry]`` of a weave and the default ``[volume]`` are taken from it.
 """
 
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -38,10 +41,11 @@ from ..recon.truncation import DEFAULT_WIDTH
 from ..scene.materials import Material
 from ..scene.scene import Scene
 from ..weave.tessellation import resolution_for
+from .pose import Pose
 
 __all__ = ["ScanFile", "ScanOptions", "load_scan_file", "mesh_resolution_for"]
 
-_TABLES = {"geometry", "objects", "weave", "mount", "materials", "source", "detector", "volume", "scan"}
+_TABLES = {"geometry", "objects", "weave", "mount", "materials", "source", "detector", "volume", "scan", "pose"}
 
 
 @dataclass(frozen=True)
@@ -97,11 +101,12 @@ class ScanOptions:
 class ScanFile:
     """A loaded scan file. The sample is ``scene`` (from ``[[objects]]``) or ``weave`` (from
     ``[weave]``, meshed by :meth:`sample_scene`); the other is None. ``box_mm``: the sample's
-    ``(2, 3)`` min/max corners in the scanner frame (a weave's as placed there). ``realism``: the
+    ``(2, 3)`` min/max corners in the scanner frame (a weave's as placed there), posed. ``realism``: the
     scanner's imperfections; ``mount``: the ``[[mount]]`` objects (None without), which
-    :meth:`with_mount` adds to the sample for the projections."""
+    :meth:`with_mount` adds to the sample for the projections; ``pose``: the ``[pose]`` (the objects
+    of ``scene`` are posed already, a weave is posed by :meth:`sample_scene`)."""
 
-    path: Path
+    path: Path | str  # the file, or the ``where`` name of a table loaded from a dict
     scene: Scene | None
     weave: WeaveFile | None
     box_mm: np.ndarray
@@ -113,14 +118,16 @@ class ScanFile:
     mesh_resolution: dict | None = None  # a weave's knobs, and whether the grid chose them (mesh_resolution_for)
     realism: Realism = Realism()
     mount: Scene | None = None
+    pose: Pose = Pose()
 
     def sample_scene(self, progress: bool = False) -> Scene:
-        """The scene to scan: the objects, or the weave meshed and moved so its box is centred on the axis."""
+        """The scene to scan: the objects, or the weave meshed and moved so its box is centred on the
+        axis; posed either way."""
         if self.weave is None:
             return self.scene
         lo, hi = self.weave.sample.box
-        return self.weave.sample.scene(self.weave.materials, transform=Transform.translation(-(lo + hi) / 2),
-                                       progress=progress)
+        centred = self.pose.transform @ Transform.translation(-(lo + hi) / 2)
+        return self.weave.sample.scene(self.weave.materials, transform=centred, progress=progress)
 
     def with_mount(self, sample: Scene) -> Scene:
         """What the projections see: ``sample`` (from :meth:`sample_scene`, which the labels are made
@@ -151,10 +158,16 @@ class ScanFile:
                 "tracers": [t.yarn for t in self.weave.materials.tracers]}
 
 
-def load_scan_file(path) -> ScanFile:
-    """Read and check a scan file (module docstring); errors are ConfigErrors naming the file, table and key."""
-    path = Path(path)
-    data = read_toml(path, "scan file")
+def load_scan_file(source, *, where: str = "scan table", base_dir=None) -> ScanFile:
+    """Read and check a scan file (module docstring), or the dict of one already parsed (TOML's tables
+    as dicts, e.g. a dataset's drawn table): then ``where`` names it in messages and as the result's
+    ``path``, and relative file paths (meshes, spectrum files) are relative to ``base_dir`` (default:
+    the current directory). Errors are ConfigErrors naming the file (or ``where``), table and key."""
+    if isinstance(source, Mapping):
+        path, data, base = where, source, Path(base_dir if base_dir is not None else ".")
+    else:
+        path = Path(source)
+        data, base = read_toml(path, "scan file"), path.parent
     fields.only(data, _TABLES, f"{path}")
     has_objects, has_weave = "objects" in data, "weave" in data
     if has_objects == has_weave:
@@ -165,6 +178,7 @@ def load_scan_file(path) -> ScanFile:
     options = ScanOptions.from_dict(fields.table(data.get("scan", {}), "scan", f"{path}"), f"{path} [scan]")
     volume = VolumeGeometry.from_dict(data["volume"], f"{path} [volume]") if "volume" in data else None
     materials = _materials(data["materials"], f"{path} [materials]") if "materials" in data else None
+    pose = Pose.from_dict(fields.table(data["pose"], "pose", f"{path}"), f"{path} [pose]") if "pose" in data else Pose()
     geometry = None
     if "geometry" in data:
         geometry = _geometry(fields.table(data["geometry"], "geometry", f"{path}"), f"{path} [geometry]")
@@ -173,16 +187,21 @@ def load_scan_file(path) -> ScanFile:
         weave = WeaveFile(path, *weave_from_dict(data["weave"], materials or {}, f"{path} [weave]"))
         lo, hi = weave.sample.box
         box = np.stack([lo, hi]) - (lo + hi) / 2
-        geometry = geometry or framing_geometry(box)
+        pose = pose.about(np.zeros(3))
+        box = pose.box(box)
+        # The framing sees a box centred on the axis: the smallest such box around the posed one.
+        geometry = geometry or framing_geometry(np.abs(box).max(axis=0) * [[-1], [1]])
     else:
         if geometry is None:
             raise ConfigError(f"{path}: missing [geometry] table (needed with [[objects]]; a [weave] sample frames itself)")
-        scene, materials = _objects(data["objects"], path, materials)
+        scene, materials = _objects(data["objects"], path, base, materials)
+        pose = pose.about(scene.bounds.mean(axis=0))
+        scene = pose.place(scene)
         box = scene.bounds
     mount = None
     if "mount" in data:
-        mount, materials = _mount(data["mount"], path, materials, scene)
-    spectrum = _source(fields.table(data["source"], "source", f"{path}"), path.parent, f"{path} [source]")
+        mount, materials = _mount(data["mount"], path, base, materials, scene)
+    spectrum = _source(fields.table(data["source"], "source", f"{path}"), base, f"{path} [source]")
     detector = None
     if "detector" in data:
         detector = _detector(fields.table(data["detector"], "detector", f"{path}"), materials, f"{path} [detector]")
@@ -195,7 +214,7 @@ def load_scan_file(path) -> ScanFile:
                  for k in ("points_per_section", "samples_per_mm")}
         weave, resolution = mesh_resolution_for(weave, volume, options.mesh_tolerance_voxels, given)
     return ScanFile(path, scene, weave, np.asarray(box, dtype=np.float64), geometry, volume, spectrum, detector,
-                    options, resolution, _realism(data, geometry, path), mount)
+                    options, resolution, _realism(data, geometry, path), mount, pose)
 
 
 def mesh_resolution_for(weave: WeaveFile, volume: VolumeGeometry, tolerance_voxels: float,
@@ -214,7 +233,7 @@ def mesh_resolution_for(weave: WeaveFile, volume: VolumeGeometry, tolerance_voxe
     return dataclasses.replace(weave, sample=dataclasses.replace(sample, **knobs)), record
 
 
-def _objects(objects, path: Path, materials: dict | None) -> tuple[Scene, dict]:
+def _objects(objects, path: Path | str, base: Path, materials: dict | None) -> tuple[Scene, dict]:
     """The ``[[objects]]`` as load_scene_file reads them; every material must resolve (a scan makes radiographs)."""
     if not isinstance(objects, list) or not objects:
         raise ConfigError(f"{path}: objects must be a non-empty array of tables ([[objects]]), got {objects!r}")
@@ -222,11 +241,11 @@ def _objects(objects, path: Path, materials: dict | None) -> tuple[Scene, dict]:
     library: dict[str, Material] = {}
     for k, spec in enumerate(objects):
         where = f"{path} [[objects]] #{k + 1}"
-        _add_object(scene, fields.table(spec, "objects", where), path.parent, where, materials or {}, library)
+        _add_object(scene, fields.table(spec, "objects", where), base, where, materials or {}, library)
     return scene, {**library, **(materials or {})}
 
 
-def _mount(mounts, path: Path, materials: dict | None, sample: Scene | None) -> tuple[Scene, dict]:
+def _mount(mounts, path: Path | str, base: Path, materials: dict | None, sample: Scene | None) -> tuple[Scene, dict]:
     """The ``[[mount]]`` tables: objects as in ``[[objects]]``, without a label or a priority (a
     mount is never labelled, and the sample owns any space it shares with one). Named ``mountK``
     unless named; a name an ``[[objects]]`` entry has is an error."""
@@ -247,5 +266,5 @@ def _mount(mounts, path: Path, materials: dict | None, sample: Scene | None) -> 
         if spec["name"] in taken:
             raise ConfigError(f"{where}: name {spec['name']!r} is taken by an [[objects]] entry; give the mount "
                               "another name")
-        _add_object(scene, spec, path.parent, where, materials or {}, library)
+        _add_object(scene, spec, base, where, materials or {}, library)
     return scene, {**library, **(materials or {})}

@@ -1,0 +1,131 @@
+"""The keys of a scan file as dotted paths (``source.kvp``, ``weave.sample.seed``, ``objects.0.translate``):
+checked against the tables the loaders read, set in a scan table, and its relative file paths made absolute.
+
+A dataset file's ``[vary]`` names scan-file keys this way (docs/dataset.md). A key is checked here,
+against the key sets the scan file's parsers use, so a misspelt key is refused with the table's
+allowed keys before any draw; whether a drawn value is of the right type and range is the scan
+file loader's check, made on every draw. Tables of the scan file not described here (a new one)
+take any key below them, left to that loader check.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+from ..core.errors import ConfigError
+from ..core.geometry import _SCAN_KEYS
+from ..io.scene_file import (
+    _DETECTOR_KEYS,
+    _MATERIAL_KEYS,
+    _OBJECT_KEYS,
+    _PRIMITIVE_KEYS,
+    _SOURCE_KINDS,
+    _SOURCE_REALISM_KEYS,
+)
+from ..io.weave_file import _SAMPLE_KEYS
+from ..core.volume import VolumeGeometry
+from ..weave.distort import Distortion
+from ..weave.spec import Section, UnitCell
+from .pose import _KEYS as _POSE_KEYS
+from .scan_file import _TABLES, ScanOptions
+
+__all__ = ["absolute_paths", "check_key", "set_key"]
+
+ANY = "*"  # any name: a material, a filter's material, an element
+INDEX = "#"  # an entry of an array of tables, by its index from 0
+
+
+def _names(*groups) -> dict:
+    """Leaf keys (values, no keys below them)."""
+    return dict.fromkeys(set().union(*groups))
+
+
+_MATERIAL = {**_names(_MATERIAL_KEYS), "mass_fractions": {ANY: None}}
+_SECTION = _names(f.name for f in dataclasses.fields(Section))
+_BUNDLE = {"fibre": None, "fibre_fraction": None}
+_OBJECT = {**_names(_OBJECT_KEYS), "mesh": _names(*_PRIMITIVE_KEYS.values())}
+KEYS = {
+    "geometry": _names({"vectors"}, *_SCAN_KEYS.values()),
+    "weave": {**_names(f.name for f in dataclasses.fields(UnitCell)), "weft_section": _SECTION,
+              "warp_section": _SECTION, "sample": _names(_SAMPLE_KEYS),
+              "distortion": _names(f.name for f in dataclasses.fields(Distortion)),
+              "materials": {"matrix": None, "weft": _BUNDLE, "warp": _BUNDLE, "tracers": None}},
+    "materials": {ANY: _MATERIAL},
+    "source": {**_names(_SOURCE_REALISM_KEYS, *_SOURCE_KINDS.values()), "filters": {ANY: None}},
+    "detector": {**_names(_DETECTOR_KEYS), "scintillator": _MATERIAL},
+    "volume": _names(f.name for f in dataclasses.fields(VolumeGeometry)),
+    "scan": _names(f.name for f in dataclasses.fields(ScanOptions)),
+    "pose": _names(_POSE_KEYS),
+    "objects": {INDEX: _OBJECT},
+    "mount": {INDEX: {k: v for k, v in _OBJECT.items() if k not in ("label", "priority")}},
+}
+#: Keys whose values are file paths, relative to the file that gives them.
+PATH_KEYS = (("objects", INDEX, "mesh"), ("mount", INDEX, "mesh"), ("source", "spectrum_file"))
+
+
+def check_key(key: str, base: dict, where: str) -> None:
+    """Refuse ``key`` (dotted) unless it names a scan-file key that can be set in ``base`` (the scan
+    table): each part a key of its table, an array entry's index within the base's array, and no
+    part below a plain value of the base."""
+    parts = key.split(".")
+    tree, table = {**KEYS, **dict.fromkeys(_TABLES - set(KEYS), ANY)}, base
+    for i, part in enumerate(parts):
+        above = ".".join(parts[:i]) or "the scan file"
+        if tree is None:
+            raise ConfigError(f"{where}: '{key}': {above} is a value, not a table; vary {above} whole "
+                              "(e.g. with choice = [...])")
+        if tree is ANY:
+            pass  # a table this module does not describe: its loader checks the key
+        elif INDEX in tree:
+            count = len(table) if isinstance(table, list) else 0
+            if not part.isdigit() or int(part) >= count:
+                raise ConfigError(f"{where}: '{key}': {above} is an array of tables; name an entry by its index, "
+                                  f"0 to {count - 1} in the base scan (got {part!r})")
+            tree, table = tree[INDEX], table[int(part)]
+            continue
+        elif part in tree or ANY in tree:
+            tree = tree.get(part, tree.get(ANY))
+        else:
+            allowed = ", ".join(sorted(tree))
+            raise ConfigError(f"{where}: '{key}': no key {part!r} in {above} (docs/scan.md); allowed: {allowed}")
+        if isinstance(table, dict) and part in table:
+            table = table[part]
+            if i < len(parts) - 1 and not isinstance(table, (dict, list)):
+                raise ConfigError(f"{where}: '{key}': the base scan's {'.'.join(parts[:i + 1])} is {table!r}, "
+                                  "not a table; vary it whole (e.g. with choice = [...])")
+        else:
+            table = {}
+
+
+def set_key(table: dict, key: str, value) -> None:
+    """Set the dotted ``key`` (checked by :func:`check_key`) in ``table``, making missing tables."""
+    *parents, last = key.split(".")
+    for part in parents:
+        table = table[int(part)] if isinstance(table, list) else table.setdefault(part, {})
+    table[last] = value
+
+
+def absolute_paths(table: dict, directory: Path) -> dict:
+    """``table`` with its relative file paths (:data:`PATH_KEYS`: mesh files, spectrum files) made
+    absolute against ``directory``, so it loads from anywhere; changed in place and returned."""
+    for path in PATH_KEYS:
+        for holder, key in _holders(table, path):
+            value = holder.get(key)
+            if isinstance(value, str) and value and not Path(value).is_absolute():
+                holder[key] = str((Path(directory) / value).resolve())
+    return table
+
+
+def _holders(table, path: tuple):
+    """The (dict, key) pairs ``path`` reaches in ``table``, ``INDEX`` standing for every array entry."""
+    first, *rest = path
+    if not rest:
+        if isinstance(table, dict):
+            yield table, first
+        return
+    if first == INDEX:
+        for item in table if isinstance(table, list) else ():
+            yield from _holders(item, tuple(rest))
+    elif isinstance(table, dict) and first in table:
+        yield from _holders(table[first], tuple(rest))
