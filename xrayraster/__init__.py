@@ -34,7 +34,7 @@ _HOMES = {
     ".physics.radiograph": ("Radiograph",),
     ".physics.realism": ("Realism",),
     ".physics.spectrum": ("Spectrum",),
-    ".pipeline": ("Comparison", "ScanResult", "WeaveResult", "compare", "scan"),
+    ".pipeline": ("BuildReport", "Comparison", "ScanResult", "WeaveResult", "build", "compare", "scan"),
     ".recon.fdk": ("FDKStream", "Volume", "fdk"),
     ".recon.opencl": ("CLContext",),
     ".scene.materials": ("Material",),

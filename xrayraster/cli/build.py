@@ -8,12 +8,14 @@ nothing. Exit status 1 when a sample failed twice (``DIR/failed.csv`` says which
 
 from __future__ import annotations
 
+import logging
 import sys
 from pathlib import Path
 
 from ..core.errors import ConfigError
 from ..pipeline.dataset import build
-from ..pipeline.dataset_file import format_plan, load_dataset_file, plan_rows
+from ..pipeline.dataset_file import load_dataset_file
+from ..pipeline.dataset_plan import format_plan, plan_rows
 from .options import positive_int
 
 
@@ -31,12 +33,14 @@ def add_parser(subparsers) -> None:
                         help="draw and check every sample, print their parameters, time and disk use; build nothing")
     parser.add_argument("--force", action="store_true",
                         help="DIR holds a build of a changed dataset file: remove that build's samples and start again")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar and no line a sample")
     parser.add_argument("-v", "--verbose", action="store_true", help="one log line per sample, and tracebacks")
     parser.set_defaults(run=run)
 
 
 def run(args) -> int:
+    if not args.quiet:  # the build's line a sample, without the stages' own details (those with -v)
+        logging.getLogger(build.__module__).setLevel(logging.INFO)
     dataset = load_dataset_file(args.dataset)
     if args.plan:
         print(format_plan(plan_rows(dataset)))

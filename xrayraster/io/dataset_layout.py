@@ -15,8 +15,8 @@ The build directory ``root`` is the runner's: it checks, before the build, that 
 or an earlier build's (docs/outputs.md); these writers then replace only their own names in it.
 
 A sample's *record* is what the runner passes (``split``, ``seed``, the drawn ``values`` by dotted
-key, optionally ``seconds`` and anything else JSON-ready) completed by :func:`stored_record`
-(``index``, the label ``fractions``, ``seconds``); :meth:`~DatasetLayout.finished` gives it back
+key and anything else JSON-ready, nothing that varies between runs) completed by
+:func:`stored_record` (``index``, the label ``fractions``); :meth:`~DatasetLayout.finished` gives it back
 for every complete sample, so the runner can rebuild the manifest from the disk alone.
 """
 
@@ -72,9 +72,10 @@ class DatasetLayout(Protocol):
 
     def write_sample(self, root: Path, index: int, result: ScanOutput, record: dict, *, name: str,
                      projections: Projections | None = None,
-                     write_meshes: Callable[[Path], None] | None = None) -> None:
+                     write_meshes: Callable[[Path], None] | None = None) -> dict:
         """Write sample ``index`` atomically: its volume, labels and :func:`stored_record`, and, when
-        given, its ``projections`` and the meshes ``write_meshes(directory)`` writes."""
+        given, its ``projections`` and the meshes ``write_meshes(directory)`` writes. Returns the
+        stored record."""
 
     def finished(self, root: Path, name: str) -> dict[int, dict]:
         """index → stored record of every complete sample under ``root`` (temporaries and the
@@ -95,17 +96,16 @@ def sample_id(index: int) -> str:
 
 
 def stored_record(index: int, result: ScanOutput, record: dict) -> dict:
-    """The runner's ``record`` as stored: with ``index``, ``fractions`` (label value as a string →
-    the share of the voxels with that label, labels present only) and ``seconds`` (the scan's total
-    from its metadata when the runner gave none). Refuses a record without a known ``split``."""
+    """The runner's ``record`` as stored: with ``index`` and ``fractions`` (label value as a string →
+    the share of the voxels with that label, labels present only). Refuses a record without a
+    known ``split``."""
     if record.get("index", index) != index:
         raise ConfigError(f"sample {index}: its record says index {record['index']}")
     if record.get("split") not in SPLITS:
         raise ConfigError(f"sample {index}: split must be one of {', '.join(SPLITS)}, got {record.get('split')!r}")
     counts = np.bincount(np.asarray(result.labels.data).ravel())
     fractions = {str(label): count / counts.sum() for label, count in enumerate(counts.tolist()) if count}
-    seconds = record.get("seconds", result.metadata.get("seconds", {}).get("total"))
-    return {**record, "index": index, "fractions": fractions, "seconds": seconds}
+    return {**record, "index": index, "fractions": fractions}
 
 
 def label_names(labels: dict[int, str]) -> dict[int, str]:
@@ -197,7 +197,7 @@ class TiffLayout:
     The directory is built under a hidden name and moved into place whole, ``sample.json`` its
     marker (:func:`~xrayraster.core.files.atomic_directory`)."""
 
-    def write_sample(self, root, index, result, record, *, name, projections=None, write_meshes=None) -> None:
+    def write_sample(self, root, index, result, record, *, name, projections=None, write_meshes=None) -> dict:
         _check_name(name)
         stored = stored_record(index, result, record)
         directory = Path(root) / "samples" / sample_id(index)
@@ -207,6 +207,7 @@ class TiffLayout:
             result.labels.save(tmp / LABELS_TIF, quicklook=False)
             _write_extras(tmp, projections, write_meshes)
             atomic_write_text(tmp / SAMPLE_JSON, _json(_document("tiff", stored, result)))
+        return stored
 
     def finished(self, root, name) -> dict[int, dict]:
         done = {}
@@ -241,7 +242,7 @@ class NnunetLayout:
         case, part = self.case(index, name), "Tr" if split in TRAINING_SPLITS else "Ts"
         return [f"images{part}/{case}_0000.nii.gz", f"labels{part}/{case}.nii.gz", f"records/{case}.json"]
 
-    def write_sample(self, root, index, result, record, *, name, projections=None, write_meshes=None) -> None:
+    def write_sample(self, root, index, result, record, *, name, projections=None, write_meshes=None) -> dict:
         _check_name(name)
         root = Path(root)
         stored = stored_record(index, result, record)
@@ -254,6 +255,7 @@ class NnunetLayout:
             (label, nifti_writer(_uint8_labels(result), grid, description=GENERATOR)),
             (record_path, lambda tmp: Path(tmp).write_text(document, encoding="utf-8")),
         ])
+        return stored
 
     def finished(self, root, name) -> dict[int, dict]:
         _check_name(name)
@@ -300,7 +302,7 @@ class Hdf5Layout:
     def sample_paths(self, index, split, name) -> list[str]:
         return [f"samples/{sample_id(index)}.h5"]
 
-    def write_sample(self, root, index, result, record, *, name, projections=None, write_meshes=None) -> None:
+    def write_sample(self, root, index, result, record, *, name, projections=None, write_meshes=None) -> dict:
         _check_name(name)
         root = Path(root)
         stored = stored_record(index, result, record)
@@ -328,6 +330,7 @@ class Hdf5Layout:
                     f.attrs[key] = json.dumps(document[key], default=json_ready)
 
         atomic_write(root / self.sample_paths(index, stored["split"], name)[0], write)
+        return stored
 
     def finished(self, root, name) -> dict[int, dict]:
         h5py = optional_module("h5py", "dataset", "the hdf5 dataset layout")

@@ -2,7 +2,8 @@
 
 Columns, in order: ``index``, ``split``, ``seed``; every drawn value under its dotted key (sorted;
 a sample that did not draw a key leaves it empty); ``fraction.<label name>`` for each declared
-label, background first (the share of the sample's voxels with that label); ``seconds``. Strings are
+label, background first (the share of the sample's voxels with that label). No wall times: the
+same build gives the same bytes (a build logs its times instead). Strings are
 written as they are, other values as JSON (numbers in their shortest exact form, lists as
 ``[1, 2]``, booleans ``true``/``false``); a missing value is empty.
 """
@@ -50,24 +51,23 @@ def cell(value) -> str:
 
 def manifest_text(records: dict[int, dict], label_names: dict[int, str]) -> str:
     """The CSV of ``records`` (index → the record a layout stored, with ``split``, ``seed``,
-    ``values``, ``fractions`` by label value and ``seconds``), one row per index in order, the
+    ``values`` and ``fractions`` by label value), one row per index in order, the
     fraction columns named by ``label_names`` (label value → name, 0 included)."""
     values = {index: flat_values(record.get("values", {})) for index, record in records.items()}
     drawn = sorted({key for flat in values.values() for key in flat})
     fractions = [f"fraction.{label_names[label]}" for label in sorted(label_names)]
-    clash = sorted(set(drawn) & {*FIXED_COLUMNS, *fractions, "seconds"})
+    clash = sorted(set(drawn) & {*FIXED_COLUMNS, *fractions})
     if clash:
         raise ConfigError(f"a drawn value's key {clash[0]!r} is also a column of manifest.csv; rename the key")
     out = io.StringIO()
     writer = csv.writer(out, lineterminator="\n")
-    writer.writerow([*FIXED_COLUMNS, *drawn, *fractions, "seconds"])
+    writer.writerow([*FIXED_COLUMNS, *drawn, *fractions])
     for index in sorted(records):
         record = records[index]
         shares = record.get("fractions", {})
         writer.writerow([index, cell(record.get("split")), cell(record.get("seed")),
                          *(cell(values[index].get(key)) for key in drawn),
-                         *(cell(shares.get(str(label), 0.0)) for label in sorted(label_names)),
-                         cell(record.get("seconds"))])
+                         *(cell(shares.get(str(label), 0.0)) for label in sorted(label_names))])
     return out.getvalue()
 
 

@@ -23,23 +23,24 @@ written to ``failed.csv`` with its drawn values and the error.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import json
 import logging
 import os
 import shutil
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-
-import numpy as np
 
 from ..core.errors import ConfigError, XrayrasterError
 from ..core.files import atomic_write_text, probe_writable, remove_stale_temporaries_in
 from ..core.ownership import FILE_SUFFIXES, resolved_output
 from ..core.provenance import package_version
-from .dataset_file import DatasetFile, differences, draw, fingerprint, load_dataset_file, plan_rows
-from .dataset_layout import LAYOUTS
+from ..io.dataset_layout import LAYOUTS
+from .dataset_file import DatasetFile, differences, draw, fingerprint, identity, load_dataset_file
+from .dataset_plan import sample_bytes
 
 __all__ = ["BuildReport", "build", "build_sample"]
 
@@ -47,8 +48,10 @@ log = logging.getLogger(__name__)
 
 GENERATOR = "xrayraster build"
 RECORD_NAME, FAILED_NAME = "build.json", "failed.csv"
-# Keys of a scan's metadata that differ between two runs of the same sample: kept out of its files.
-VOLATILE = ("seconds", "peak_rss_mib")
+# Keys of a scan's metadata that differ between two runs of the same sample, kept out of its files:
+# wall times, the memory peak, and the devices (an OpenCL CPU device's description counts the
+# compute units a worker was given).
+VOLATILE = ("seconds", "peak_rss_mib", "devices")
 RETRIES = 1
 
 
@@ -90,7 +93,7 @@ def build(config, directory, *, workers: int = 1, dask: bool = False, scheduler:
             else:
                 built.append(summary["index"])
                 log.info("sample %05d  seed %d  %.1f s  %s", summary["index"], summary["seed"], summary["seconds"],
-                         "  ".join(f"{k} {v:.3f}" for k, v in summary["class_fractions"].items()))
+                         "  ".join(f"{k} {v:.3f}" for k, v in summary["fractions"].items()))
     finally:
         for folder in [root, *(p for p in root.rglob("*") if p.is_dir() and not p.name.startswith("."))]:
             remove_stale_temporaries_in(folder)  # the pool's, when it was stopped
@@ -102,32 +105,33 @@ def build(config, directory, *, workers: int = 1, dask: bool = False, scheduler:
 
 
 def build_sample(dataset: DatasetFile, root, index: int, threads: int | None = None) -> dict:
-    """Draw, scan and write sample ``index`` (the work of one task, in whichever process runs it);
-    returns a summary for the log: index, seed, seconds, class fractions."""
-    from ..recon.opencl import CLContext  # noqa: F401  (imported by the worker's contexts)
+    """Draw, scan and write sample ``index`` (one task, in whichever process runs it); returns a
+    summary for the log: index, seed, wall seconds and the share of each label by name."""
+    from .scan import scan
+    from .woven import weave
 
     start = time.perf_counter()
     drawn = draw(dataset, index)
     for reason in drawn.redraws:
         log.info("sample %05d redrawn: %s", index, reason)
     gl, cl = _worker_contexts()
-    from .scan import scan
+    keep_projections = "projections" in dataset.keep
+    result = scan(drawn.scan, gl=gl, cl=cl, threads=threads, keep_projections=keep_projections)
+    names = {k: v for k, v in result.metadata["labels"].items() if k != "0"}
+    record = {"seed": drawn.seed, "split": drawn.split, "values": drawn.values, "attempts": drawn.attempts,
+              "labels": names}
+    woven = drawn.scan.weave
+    meshes = (lambda directory: weave(woven).write(directory)) if "meshes" in dataset.keep and woven else None
+    stored = LAYOUTS[dataset.layout].write_sample(
+        Path(root), index, dataclasses.replace(result, metadata=_steady(result.metadata)), record,
+        name=dataset.name, projections=result.projections, write_meshes=meshes)
+    fractions = {names.get(k, "air" if k == "0" else k): v for k, v in stored["fractions"].items()}
+    return {"index": index, "seed": drawn.seed, "seconds": time.perf_counter() - start, "fractions": fractions}
 
-    result = scan(drawn.scan, gl=gl, cl=cl, threads=threads)
-    fractions = class_fractions(result.labels.data, result.metadata["labels"])
-    record = {"generator": GENERATOR, "index": index, "seed": drawn.seed, "split": drawn.split,
-              "values": drawn.values, "attempts": drawn.attempts, "class_fractions": fractions}
-    metadata = {k: v for k, v in result.metadata.items() if k not in VOLATILE}
-    LAYOUTS[dataset.layout].write_sample(Path(root), index, _with_metadata(result, metadata), record,
-                                         name=dataset.name)
-    return {"index": index, "seed": drawn.seed, "seconds": time.perf_counter() - start,
-            "class_fractions": fractions}
 
-
-def class_fractions(labels: np.ndarray, names: dict[str, str]) -> dict[str, float]:
-    """The share of the volume's voxels each label takes, by label name (``names``: value → name)."""
-    counts = np.bincount(labels.ravel(), minlength=max(int(k) for k in names) + 1)
-    return {name: round(float(counts[int(k)]) / labels.size, 6) for k, name in names.items()}
+def _steady(metadata: dict) -> dict:
+    """A scan's metadata without what differs between two runs of it (:data:`VOLATILE`)."""
+    return {k: v for k, v in metadata.items() if k not in VOLATILE}
 
 
 # -- the directory -----------------------------------------------------------------------------
@@ -141,27 +145,26 @@ def _prepare(dataset: DatasetFile, directory, force: bool) -> Path:
                           f"give a directory name such as {path.with_suffix('')}")
     root = resolved_output(path)
     probe_writable(root.parent, path)
-    record = {"generator": GENERATOR, "version": package_version(), "fingerprint": fingerprint(dataset),
-              "count": dataset.count, "layout": dataset.layout, "dataset": dataset.to_dict()}
+    if root.exists() and not root.is_dir():
+        raise ConfigError(f"{path} is a file, not a directory; choose another name")
     if root.is_dir() and any(root.iterdir()):
         earlier = _read_record(root)
         if earlier is None:
             raise ConfigError(f"{path} holds files that {GENERATOR} did not write (no {RECORD_NAME}); they are never "
                               "removed: choose another directory")
-        changed = differences(DatasetFile.from_dict(earlier["dataset"]), dataset) if \
-            earlier["fingerprint"] != record["fingerprint"] else []
+        changed = differences(earlier["identity"], dataset) if earlier["fingerprint"] != fingerprint(dataset) else []
         if earlier["count"] > dataset.count:
-            changed.append(f"count {earlier['count']} -> {dataset.count} (only growing is resumed)")
+            changed.append(f"count: {earlier['count']} -> {dataset.count} (a build only grows)")
         if changed and not force:
             raise ConfigError(f"{path} holds a build of another dataset file ({'; '.join(changed)}); rerun with the "
                               "same file (count may grow), choose another directory, or pass --force to remove this "
                               "build's samples and start again")
         if changed:
-            _remove_samples(root, DatasetFile.from_dict(earlier["dataset"]))
-    elif root.exists() and not root.is_dir():
-        raise ConfigError(f"{path} is a file, not a directory; choose another name")
+            _remove_samples(root, earlier["identity"])
     root.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(root / RECORD_NAME, json.dumps(record, indent=2) + "\n")
+    record = {"generator": GENERATOR, "version": package_version(), "fingerprint": fingerprint(dataset),
+              "count": dataset.count, "identity": identity(dataset)}
+    atomic_write_text(root / RECORD_NAME, json.dumps(record, indent=2, sort_keys=True) + "\n")
     return root
 
 
@@ -173,24 +176,25 @@ def _read_record(root: Path) -> dict | None:
     return record if isinstance(record, dict) and record.get("generator") == GENERATOR else None
 
 
-def _remove_samples(root: Path, earlier: DatasetFile) -> None:
-    """Remove the samples of an earlier build (the files its layout names, nothing else)."""
-    layout = LAYOUTS[earlier.layout]
-    for index, record in layout.finished(root, earlier.name).items():
-        for relative in layout.sample_paths(index, record["split"], earlier.name):
-            target = root / relative
-            if target.is_dir():
-                shutil.rmtree(target)
-            else:
-                target.unlink(missing_ok=True)
+def _remove_samples(root: Path, earlier: dict) -> None:
+    """Remove the samples of an earlier build (``earlier``: its identity): the files its layout
+    names and the folders they leave empty, nothing else."""
+    layout = LAYOUTS[earlier["layout"]]
+    for index, record in layout.finished(root, earlier["name"]).items():
+        paths = [root / relative for relative in layout.sample_paths(index, record["split"], earlier["name"])]
+        for path in paths:
+            path.unlink(missing_ok=True)
+        for folder in {path.parent for path in paths} - {root}:
+            if not any(folder.iterdir()):
+                folder.rmdir()
 
 
 def _check_disk(dataset: DatasetFile, root: Path, todo: list[int]) -> None:
-    """Refuse a build whose remaining samples cannot fit on the disk, before the first sample."""
+    """Refuse, before the first sample, a build whose remaining samples cannot fit on the disk (the
+    first one's size, :func:`~.dataset_plan.sample_bytes`, times their number)."""
     if not todo:
         return
-    rows = plan_rows(dataset, indices=todo[:1])
-    needed = rows[0]["disk_bytes"] * len(todo)
+    needed = sample_bytes(draw(dataset, todo[0]).scan, dataset.keep) * len(todo)
     free = shutil.disk_usage(root).free
     if needed > free:
         raise ConfigError(f"{root}: {len(todo)} samples need about {needed / 2**30:.1f} GiB and the disk has "
@@ -223,26 +227,28 @@ def _write_failed(root: Path, dataset: DatasetFile, failed: dict[int, str]) -> N
 
 
 def _run(dataset, root, todo, *, workers, dask, scheduler, progress):
-    """Summaries of the samples of ``todo`` as they finish (errors as ``{"index", "error"}``)."""
+    """Summaries of the samples of ``todo`` as they finish (errors as ``{"index", "error"}``); with
+    ``progress``, a bar with ETA and samples per hour, the log lines printed above it."""
     if not todo:
         return
-    bar = _bar(len(todo)) if progress else None
-    try:
-        if dask or scheduler:
-            runs = _on_dask(dataset, root, todo, workers, scheduler)
-        elif workers > 1:
-            runs = _on_pool(dataset, root, todo, workers)
-        else:
-            runs = (_attempt(dataset, root, index, None) for index in todo)
+    if dask or scheduler:
+        runs = _on_dask(dataset, root, todo, workers, scheduler)
+    elif workers > 1:
+        runs = _on_pool(dataset, root, todo, workers)
+    else:
+        runs = (_attempt(dataset, root, index, None) for index in todo)
+    if not progress:
+        yield from runs
+        return
+    from tqdm import tqdm
+    from tqdm.contrib.logging import logging_redirect_tqdm
+
+    with tqdm(total=len(todo), desc="samples", unit="sample", file=sys.stderr) as bar, logging_redirect_tqdm():
         for summary in runs:
-            if bar is not None:
-                bar.update()
-                hours = bar.format_dict["elapsed"] / 3600
-                bar.set_postfix_str(f"{bar.n / hours:.0f} samples/h" if hours else "")
+            bar.update()
+            hours = bar.format_dict["elapsed"] / 3600
+            bar.set_postfix_str(f"{bar.n / hours:.0f} samples/h" if hours else "")
             yield summary
-    finally:
-        if bar is not None:
-            bar.close()
 
 
 def _attempt(dataset, root, index, threads) -> dict:
@@ -318,17 +324,3 @@ def _worker_contexts():
 
         _contexts = (GLContext(), CLContext())
     return _contexts
-
-
-def _with_metadata(result, metadata: dict):
-    import dataclasses
-
-    return dataclasses.replace(result, metadata=metadata)
-
-
-def _bar(total: int):
-    import sys
-
-    from tqdm import tqdm
-
-    return tqdm(total=total, desc="samples", unit="sample", file=sys.stderr)

@@ -17,6 +17,7 @@ from __future__ import annotations
 import copy
 import hashlib
 import json
+import os
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -33,7 +34,7 @@ from .distributions import Distribution, Fixed, distribution_from, is_distributi
 from .scan_file import _TABLES, ScanFile, load_scan_file
 from .scan_keys import absolute_paths, check_key, set_key
 
-__all__ = ["DatasetFile", "Draw", "differences", "draw", "fingerprint", "load_dataset_file"]
+__all__ = ["DatasetFile", "Draw", "differences", "draw", "fingerprint", "identity", "load_dataset_file"]
 
 #: Attempts at a sample before its draws are called impossible: a draw that a scan file cannot
 #: hold (yarns wider than their spacing) is redrawn from the next derived seed.
@@ -98,8 +99,9 @@ def load_dataset_file(source, *, base_dir=None) -> DatasetFile:
         path, data, where = None, source, "dataset table"
         directory = Path(base_dir if base_dir is not None else ".").absolute()
     else:
-        path = Path(source)
-        data, where, directory = read_toml(path, "dataset file"), str(path), path.parent.absolute()
+        # Absolute and normalised: the samples' metadata names the file, the same however it was spelt.
+        path = Path(os.path.abspath(source))
+        data, where, directory = read_toml(path, "dataset file"), str(path), path.parent
     fields.only(data, {"base", "dataset", "vary", *_TABLES}, where)
     base = _base(data, directory, where)
     settings = fields.table(fields.required(data, "dataset", where), "dataset", where)
@@ -156,13 +158,15 @@ def drawn_table(dataset: DatasetFile, values: dict, seed: int) -> dict:
 def fingerprint(dataset: DatasetFile) -> str:
     """sha256 (hex) of the canonical JSON of everything that decides the samples but ``count``, so a
     build can refuse a changed dataset file against its existing samples (and grow with ``count``)."""
-    return hashlib.sha256(_canonical(_identity(dataset)).encode()).hexdigest()
+    return hashlib.sha256(_canonical(identity(dataset)).encode()).hexdigest()
 
 
-def differences(a: DatasetFile, b: DatasetFile) -> list[str]:
-    """What changed from ``a`` to ``b`` among what :func:`fingerprint` hashes, one line per key
-    (``seed: 1 -> 2``, ``base weave.sample.cells: [2, 2] -> [3, 3]``, ``vary source.kvp: absent -> ...``)."""
-    old, new = _flat(_identity(a)), _flat(_identity(b))
+def differences(a: DatasetFile | dict, b: DatasetFile | dict) -> list[str]:
+    """What changed from ``a`` to ``b`` (datasets, or their :func:`identity`, as a build records it)
+    among what :func:`fingerprint` hashes, one line per key (``seed: 1 -> 2``, ``base
+    weave.sample.cells: [2, 2] -> [3, 3]``, ``vary source.kvp: absent -> ...``)."""
+    # Through JSON, as a record holds it: tuples and lists, ints and floats then compare alike.
+    old, new = (_flat(json.loads(_canonical(d if isinstance(d, dict) else identity(d)))) for d in (a, b))
     return [f"{key}: {_show(old, key)} -> {_show(new, key)}" for key in sorted(old.keys() | new.keys())
             if old.get(key, _ABSENT) != new.get(key, _ABSENT)]
 
@@ -277,7 +281,9 @@ def _split(splits: dict, u: float) -> str:
 _ABSENT = object()
 
 
-def _identity(dataset: DatasetFile) -> dict:
+def identity(dataset: DatasetFile) -> dict:
+    """Everything that decides the samples but ``count``, JSON-ready: what :func:`fingerprint` hashes
+    and a build's record keeps, so a later run can say what changed."""
     return {"base": dataset.base, "seed": dataset.seed, "layout": dataset.layout, "splits": dataset.splits,
             "name": dataset.name, "keep": list(dataset.keep),
             "vary": {key: d.to_dict() for key, d in dataset.vary.items()}}
@@ -287,10 +293,10 @@ def _canonical(value) -> str:
     return json.dumps(value, sort_keys=True, separators=(",", ":"), ensure_ascii=True, default=str)
 
 
-def _flat(identity: dict) -> dict:
+def _flat(ident: dict) -> dict:
     """Dotted names for :func:`differences`: the base scan's keys, each ``[vary]`` key whole, the rest."""
-    flat = {f"vary {key}": value for key, value in identity["vary"].items()}
-    flat.update({key: value for key, value in identity.items() if key not in ("base", "vary")})
+    flat = {f"vary {key}": value for key, value in ident["vary"].items()}
+    flat.update({key: value for key, value in ident.items() if key not in ("base", "vary")})
 
     def walk(value, prefix):
         if isinstance(value, dict) and value:
@@ -299,7 +305,7 @@ def _flat(identity: dict) -> dict:
         else:
             flat[f"base {prefix}"] = value
 
-    walk(identity["base"], "")
+    walk(ident["base"], "")
     return flat
 
 

@@ -9,23 +9,32 @@ from .dataset_file import DatasetFile, draw
 from .plan import scan_estimate
 from .scan import BATCH_VIEWS
 
-__all__ = ["format_plan", "plan_rows"]
+__all__ = ["format_plan", "plan_rows", "sample_bytes"]
 
 #: Bytes a voxel of a sample takes on disk: the float32 volume and the uint8 labels (uncompressed;
 #: the build adds the projections when it keeps them).
 BYTES_PER_VOXEL = 4 + 1
 
 
-def plan_rows(dataset: DatasetFile) -> list[dict]:
-    """One row per sample: ``index``, ``split``, ``seed``, ``values`` (dotted key → drawn value),
-    ``attempts``, ``seconds`` (the scan's predicted time, s) and ``bytes`` (volume and labels)."""
+def plan_rows(dataset: DatasetFile, indices=None) -> list[dict]:
+    """One row per sample (of ``indices``, default all): ``index``, ``split``, ``seed``, ``values``
+    (dotted key → drawn value), ``attempts``, ``seconds`` (the scan's predicted time, s) and
+    ``bytes`` (:func:`sample_bytes`)."""
     rows = []
-    for index in range(dataset.count):
+    for index in range(dataset.count) if indices is None else indices:
         d = draw(dataset, index)
-        nz, ny, nx = d.scan.volume.shape
         rows.append({"index": index, "split": d.split, "seed": d.seed, "values": d.values, "attempts": d.attempts,
-                     "seconds": scan_estimate(d.scan, BATCH_VIEWS).seconds, "bytes": nz * ny * nx * BYTES_PER_VOXEL})
+                     "seconds": scan_estimate(d.scan, BATCH_VIEWS).seconds, "bytes": sample_bytes(d.scan, dataset.keep)})
     return rows
+
+
+def sample_bytes(scan_file, keep=()) -> int:
+    """A sample's bytes on disk, uncompressed: its volume and labels, and its projections (float32)
+    when ``keep`` holds ``"projections"`` (meshes, when kept, are not counted: a few MB)."""
+    nz, ny, nx = scan_file.volume.shape
+    rows, cols = scan_file.geometry.detector_shape
+    kept = 4 * scan_file.geometry.num_views * rows * cols if "projections" in keep else 0
+    return nz * ny * nx * BYTES_PER_VOXEL + kept
 
 
 def format_plan(rows: list[dict]) -> str:
