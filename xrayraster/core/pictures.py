@@ -25,6 +25,7 @@ from .tiff import png_text, quicklook_factor
 OVERLAY_ALPHA = 0.35  # the label colour's share in the overlay: enough to read classes, the grey still shows
 GALLERY_PX = 256  # a gallery panel's long side is enlarged to at least this (integer factor): six rows fit a screen
 MARGIN, GAP = 16, 10
+SCALE_BAR_PX = 160  # the scale bar's longest length: it fits the side column
 SLICES_COLUMNS = ("reconstruction", "labels", "overlay")
 GALLERY_COLUMNS = ("reconstruction", "labels")
 _AXES = "zyx"
@@ -183,7 +184,7 @@ def _side(draw, xy, parts, window, entries, bar_px, mm_per_px) -> tuple[Box, dic
     right, boxes = x, {}
     for part, title in parts:
         if part == "scale":
-            covered, boxes["scale_bar"] = figure.scale_bar(draw, (x, y), mm_per_px, 160, note=title)
+            covered, boxes["scale_bar"] = figure.scale_bar(draw, (x, y), mm_per_px, SCALE_BAR_PX, note=title)
         else:
             right = max(right, figure.text(draw, (x, y), title)[2])
             y += line
