@@ -138,3 +138,9 @@ def test_the_gallery_has_one_row_per_sample_in_one_window(tmp_path):
 def test_a_gallery_needs_a_sample():
     with pytest.raises(ConfigError, match="at least one sample"):
         gallery_picture([])
+
+
+def test_slices_without_labels_have_no_legend():
+    volume, _ = box_sample()
+    picture = slices_picture(volume, np.zeros(SHAPE, np.uint8))
+    assert not [k for k in picture.boxes if k.startswith("legend")] and "colour_bar" in picture.boxes

@@ -75,7 +75,7 @@ def slices_picture(volume: np.ndarray, labels: np.ndarray, names=None, grid=None
         rows.append((_AXES[axis], _slice_caption(axis, middle, volume.shape[axis], grid),
                      [figure.enlarge(p, factor) for p in (grey, colour, overlay)]))
         shown.append(lab)
-    side = [("bar", "grey, cm⁻¹"), ("legend", "labels")]
+    side = [("bar", "grey, cm⁻¹"), ("legend", "labels")]  # (part, title); _side drops an empty legend
     if grid is not None:
         vz, vy, vx = grid.voxel_size
         side.append(("scale", "along x" if not vy == vx == vz else ""))
@@ -105,7 +105,7 @@ def gallery_picture(samples) -> Picture:
         rows.append((str(index), str(caption), [figure.enlarge(p, factor) for p in (grey, figure.label_colours(lab))]))
         shown.append(lab)
         for key, name in (named or {}).items():
-            names.setdefault(int(key), name)
+            names.setdefault(str(key), name)
     header = (f"The central z slice of {len(samples)} sample{'s' if len(samples) > 1 else ''}: the reconstruction "
               f"in one grey window for all of them, so their greys compare ({window[0]:.3g} to {window[1]:.3g} "
               f"cm⁻¹, the 1st to the 99.5th percentile of their labelled voxels), and the labels; +y up.")
@@ -114,8 +114,8 @@ def gallery_picture(samples) -> Picture:
 
 
 def _slice_caption(axis: int, index: int, size: int, grid) -> str:
-    """Which slice a row of slices.png is, and how its picture lies: ``central z slice: z = 12 of
-    24 (at +0.12 mm); x across, y up``."""
+    """Which slice a row of slices.png is, and how its picture lies: ``central z slice: voxel z = 12
+    of 24 (at z = +0.12 mm); x across, y up`` (the place in mm with a ``grid`` only)."""
     name = _AXES[axis]
     across, up = {0: ("x", "y"), 1: ("x", "z"), 2: ("y", "z")}[axis]
     at = ""
@@ -183,6 +183,8 @@ def _side(draw, xy, parts, window, entries, bar_px, mm_per_px) -> tuple[Box, dic
     line = figure.line_px()
     right, boxes = x, {}
     for part, title in parts:
+        if part == "legend" and not entries:  # nothing labelled in the slices shown
+            continue
         if part == "scale":
             covered, boxes["scale_bar"] = figure.scale_bar(draw, (x, y), mm_per_px, SCALE_BAR_PX, note=title)
         else:
