@@ -197,7 +197,7 @@ def test_an_interrupted_scan_leaves_nothing(tmp_path, monkeypatch):
     result = xr.ScanResult(xr.Volume(np.ones(grid.shape, np.float32), grid),
                            xr.LabelVolume(np.ones(grid.shape, np.uint8), grid), {"generator": "xrayraster scan"})
 
-    def interrupted(path, *args):
+    def interrupted(path, *args, **kwargs):
         Path(path).write_bytes(b"half")
         raise KeyboardInterrupt
 

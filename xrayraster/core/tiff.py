@@ -144,7 +144,7 @@ def write_quicklook(path, image: np.ndarray, pixel_size_mm: float | tuple[float,
         canvas = Image.fromarray(picture)
     else:
         pitch = float(np.atleast_1d(pixel_size_mm)[-1])  # the column pitch sets the horizontal bar
-        length, bar_px = _scale_bar(pitch / factor, picture.shape[1])
+        length, bar_px = scale_bar_length(pitch / factor, picture.shape[1] / 4)
         label = f"{length:g} mm" + (f" {where}" if where else "")
         canvas = Image.new("L", (picture.shape[1], picture.shape[0] + _BAR_STRIP_PX), 0)
         canvas.paste(Image.fromarray(picture), (0, 0))
@@ -158,9 +158,10 @@ def write_quicklook(path, image: np.ndarray, pixel_size_mm: float | tuple[float,
     return atomic_write(path, lambda tmp: canvas.save(tmp, format="PNG", pnginfo=info))
 
 
-def _scale_bar(mm_per_px: float, width_px: int) -> tuple[float, int]:
-    """A round length (1, 2 or 5 × 10^k mm) whose bar spans at most a quarter of the width."""
-    target = max(width_px / 4, 1) * mm_per_px
+def scale_bar_length(mm_per_px: float, max_px: float) -> tuple[float, int]:
+    """(mm, px): a round length (1, 2 or 5 × 10^k mm) whose bar spans at most ``max_px`` pixels
+    (a quick-look's bar: a quarter of its width)."""
+    target = max(max_px, 1) * mm_per_px
     power = 10.0 ** math.floor(math.log10(target))
     length = max((m * power for m in (1, 2, 5) if m * power <= target), default=power)
     return float(f"{length:.6g}"), max(1, round(length / mm_per_px))

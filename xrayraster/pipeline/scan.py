@@ -18,10 +18,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.files import atomic_directory, atomic_write, atomic_write_text, check_output_directory
+from ..core.files import atomic_directory, atomic_write_text, check_output_directory
+from ..core.pictures import write_slices
 from ..core.projections import Projections
 from ..core.provenance import package_version
-from ..core.tiff import png_text, quicklook_factor, quicklook_path
+from ..core.tiff import quicklook_path
 from ..gl.context import GLContext
 from ..gl.voxelize import LabelVolume, voxelize
 from ..physics.detector import Detector
@@ -39,11 +40,6 @@ GENERATOR = "xrayraster scan"
 VOLUME_NAME, LABELS_NAME, METADATA_NAME, SLICES_NAME = "volume.tif", "labels.tif", "scan.json", "slices.png"
 PROJECTIONS_NAME = "projections.tif"
 _LIBRARIES = ("numpy", "moderngl", "pyopencl", "manifold3d", "xraylib", "spekpy")
-# Label colours (RGB) for the slice picture, label k taking entry (k - 1) mod len: matrix, weft, warp first.
-_PALETTE = np.array([(70, 110, 220), (235, 170, 40), (200, 60, 60), (70, 190, 90), (170, 90, 200), (60, 190, 200)],
-                    dtype=np.float64)
-_OVERLAY_ALPHA = 0.35  # the label colour's share in the overlay: enough to read classes, the grey still shows
-_GAP_PX = 4  # black space between the pictures of slices.png
 # Views rendered, then filtered and backprojected, per batch: 32 MiB of line integrals at 512²,
 # and (measured) as fast in the backprojection as the FDK's largest batches. docs/scan.md
 BATCH_VIEWS = 32
@@ -80,7 +76,8 @@ class ScanResult:
             if self.projections is not None:
                 self.projections.save(tmp / PROJECTIONS_NAME)
             self.labels.save(tmp / LABELS_NAME, quicklook=False)
-            write_slices(tmp / SLICES_NAME, self.volume.data, self.labels.data)
+            write_slices(tmp / SLICES_NAME, self.volume.data, self.labels.data, names=self.metadata.get("labels"),
+                         grid=self.volume.geometry)
             atomic_write_text(tmp / METADATA_NAME, json.dumps(self.metadata, indent=2) + "\n")
         return Path(directory)
 
@@ -269,39 +266,3 @@ def label_names(scene, *, woven: bool) -> dict[str, str]:
 def _objects_report(scene) -> dict:
     return {"objects": [{"name": o.name, "label": o.label, "priority": o.priority, "material": repr(o.material)}
                         for o in scene.objects], "box_mm": scene.bounds.tolist()}
-
-
-def write_slices(path, volume: np.ndarray, labels: np.ndarray) -> Path:
-    """A PNG of the central slices across z, y and x (one row each): the reconstruction (grey), the
-    labels (colours) and the two overlaid. The grey window spans the 1st to the 99.5th percentile of
-    the labelled voxels (the sample), so matrix and yarns differ visibly and air is black. +z (or +y)
-    up, as in ``write_quicklook``; small grids enlarged by the same nearest-neighbour factor."""
-    from PIL import Image
-
-    # The labelled voxels of every 2nd plane and row set the window: a quarter of the copy, and the
-    # same window within a grey level of 255 (measured: 0.2 on the twin, 1.0 on its small version).
-    inside = volume[::2, ::2][labels[::2, ::2] > 0]
-    low, top = (float(v) for v in np.percentile(inside if inside.size else volume, [1.0, 99.5]))
-    rows = []
-    for axis in range(3):
-        middle = volume.shape[axis] // 2
-        g = np.clip((np.take(volume, middle, axis=axis)[::-1] - low) / ((top - low) or 1.0), 0.0, 1.0)
-        lab = np.take(labels, middle, axis=axis)[::-1].astype(np.int64)
-        colour = np.where((lab > 0)[..., None], _PALETTE[(lab - 1) % len(_PALETTE)], 0.0)
-        shaded = np.repeat(255 * g[..., None], 3, axis=-1)
-        overlay = np.where((lab > 0)[..., None], (1 - _OVERLAY_ALPHA) * shaded + _OVERLAY_ALPHA * colour, shaded)
-        rows.append([shaded, colour, overlay])
-    factor = quicklook_factor(volume.shape)
-    height = [max(p.shape[0] for p in row) * factor for row in rows]
-    width = max(sum(p.shape[1] * factor + _GAP_PX for p in row) for row in rows)
-    canvas = np.zeros((sum(height) + _GAP_PX * len(rows), width, 3), np.uint8)
-    y = 0
-    for row, h in zip(rows, height):
-        x = 0
-        for picture in row:
-            big = np.repeat(np.repeat(np.round(picture).astype(np.uint8), factor, axis=0), factor, axis=1)
-            canvas[y:y + big.shape[0], x:x + big.shape[1]] = big
-            x += big.shape[1] + _GAP_PX
-        y += h + _GAP_PX
-    image = Image.fromarray(canvas)
-    return atomic_write(Path(path), lambda tmp: image.save(tmp, format="PNG", pnginfo=png_text()))
