@@ -349,3 +349,12 @@ def test_foreign_entry_in_a_tiff_sample_is_kept(tmp_path):
     with pytest.raises(xr.ConfigError, match="notes.txt"):
         LAYOUTS["tiff"].write_sample(tmp_path, 1, result(), record(1, "val"), name=NAME)
     assert note.read_text() == "mine"
+
+
+@pytest.mark.parametrize("layout", sorted(LAYOUTS))
+def test_read_sample_gives_back_what_was_written(tmp_path, layout):
+    scanned = write_three(layout, tmp_path)
+    for index, split in enumerate(SPLITS):
+        volume, labels = LAYOUTS[layout].read_sample(tmp_path, index, split, NAME)
+        assert volume.dtype == np.float32 and labels.dtype == np.uint8
+        assert np.array_equal(volume, scanned.volume.data) and np.array_equal(labels, scanned.labels.data)

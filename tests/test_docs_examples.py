@@ -190,3 +190,15 @@ def test_ci_runs_the_readme_command_verbatim():
     pytest_lines = [line for line in code if "python -m pytest" in line]
     assert pytest_lines and all("XRAYRASTER_REQUIRE_GL=1" in line and "XRAYRASTER_REQUIRE_OPENCL=1" in line
                                 for line in pytest_lines)
+
+
+LINK = re.compile(r"\]\(([^)\s]+)\)")
+
+
+@pytest.mark.parametrize("doc", DOCS, ids=lambda d: str(d.relative_to(ROOT)))
+def test_every_local_link_and_picture_exists(doc):
+    """Links and pictures to files of the repository point at files that are there (outside code blocks)."""
+    text = FENCE.sub("", doc.read_text())
+    targets = [t.split("#", 1)[0] for t in LINK.findall(text) if not re.match(r"[a-z]+:|#", t)]
+    missing = [t for t in targets if t and not (doc.parent / t).exists()]
+    assert not missing, f"{doc.relative_to(ROOT)} links to missing files: {missing}"

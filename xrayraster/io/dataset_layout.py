@@ -89,6 +89,9 @@ class DatasetLayout(Protocol):
     def sample_paths(self, index: int, split: str, name: str) -> list[str]:
         """The files sample ``index`` always has, relative to the root (not the optional extras)."""
 
+    def read_sample(self, root: Path, index: int, split: str, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """(volume float32 cm⁻¹, labels uint8), both (z, y, x), of a complete sample, as written."""
+
 
 def sample_id(index: int) -> str:
     """The sample's number in file names: five digits, more when needed (``00042``, ``123456``)."""
@@ -225,6 +228,12 @@ class TiffLayout:
     def sample_paths(self, index, split, name) -> list[str]:
         return [f"samples/{sample_id(index)}/{file}" for file in (VOLUME_TIF, LABELS_TIF, SAMPLE_JSON)]
 
+    def read_sample(self, root, index, split, name) -> tuple[np.ndarray, np.ndarray]:
+        import tifffile
+
+        volume, labels, _ = (Path(root) / path for path in self.sample_paths(index, split, name))
+        return tifffile.imread(volume), tifffile.imread(labels)
+
 
 @dataclass(frozen=True)
 class NnunetLayout:
@@ -241,6 +250,11 @@ class NnunetLayout:
     def sample_paths(self, index, split, name) -> list[str]:
         case, part = self.case(index, name), "Tr" if split in TRAINING_SPLITS else "Ts"
         return [f"images{part}/{case}_0000.nii.gz", f"labels{part}/{case}.nii.gz", f"records/{case}.json"]
+
+    def read_sample(self, root, index, split, name) -> tuple[np.ndarray, np.ndarray]:
+        nib = optional_module("nibabel", "dataset", "reading NIfTI files")
+        image, label, _ = (Path(root) / path for path in self.sample_paths(index, split, name))
+        return (np.asarray(nib.load(image).dataobj, np.float32).T, np.asarray(nib.load(label).dataobj, np.uint8).T)
 
     def write_sample(self, root, index, result, record, *, name, projections=None, write_meshes=None) -> dict:
         _check_name(name)
@@ -301,6 +315,11 @@ class Hdf5Layout:
 
     def sample_paths(self, index, split, name) -> list[str]:
         return [f"samples/{sample_id(index)}.h5"]
+
+    def read_sample(self, root, index, split, name) -> tuple[np.ndarray, np.ndarray]:
+        h5py = optional_module("h5py", "dataset", "reading HDF5 files")
+        with h5py.File(Path(root) / self.sample_paths(index, split, name)[0], "r") as f:
+            return f["raw"][()], f["label"][()]
 
     def write_sample(self, root, index, result, record, *, name, projections=None, write_meshes=None) -> dict:
         _check_name(name)

@@ -37,17 +37,20 @@ from pathlib import Path
 from ..core.errors import ConfigError, XrayrasterError
 from ..core.files import atomic_write_text, probe_writable, remove_stale_temporaries_in
 from ..core.ownership import FILE_SUFFIXES, resolved_output
+from ..core.pictures import write_gallery
 from ..core.provenance import package_version
 from ..io.dataset_layout import LAYOUTS
 from .dataset_file import DatasetFile, differences, draw, fingerprint, identity, load_dataset_file
 from .dataset_plan import sample_bytes
+from .distributions import Fixed
 
 __all__ = ["BuildReport", "build", "build_sample"]
 
 log = logging.getLogger(__name__)
 
 GENERATOR = "xrayraster build"
-RECORD_NAME, FAILED_NAME = "build.json", "failed.csv"
+RECORD_NAME, FAILED_NAME, GALLERY_NAME = "build.json", "failed.csv", "gallery.png"
+GALLERY_SAMPLES = 6  # the first finished samples the gallery shows
 # Keys of a scan's metadata that differ between two runs of the same sample, kept out of its files:
 # wall times, the memory peak, and the devices (an OpenCL CPU device's description counts the
 # compute units a worker was given).
@@ -100,6 +103,7 @@ def build(config, directory, *, workers: int = 1, dask: bool = False, scheduler:
         records = layout.finished(root, dataset.name)
         layout.write_index(root, records, name=dataset.name, labels=_labels(records))
         _write_failed(root, dataset, failed)
+        _write_gallery(root, dataset, records)
     return BuildReport(root, tuple(sorted(built)), dataset.count - len(todo), failed,
                        round(time.perf_counter() - start, 3))
 
@@ -221,6 +225,25 @@ def _write_failed(root: Path, dataset: DatasetFile, failed: dict[int, str]) -> N
         drawn = draw(dataset, index)
         writer.writerow([index, drawn.seed, json.dumps(drawn.values, sort_keys=True), failed[index]])
     atomic_write_text(path, text.getvalue())
+
+
+def _write_gallery(root: Path, dataset: DatasetFile, records: dict[int, dict]) -> None:
+    """``gallery.png``: the first finished samples' central slices, captioned with what was drawn
+    for them (the varied keys, not those the dataset fixes)."""
+    if not records:
+        return
+    varied = [key for key, d in dataset.vary.items() if not isinstance(d, Fixed)]
+    layout, samples = LAYOUTS[dataset.layout], []
+    for index in sorted(records)[:GALLERY_SAMPLES]:
+        record = records[index]
+        volume, labels = layout.read_sample(root, index, record["split"], dataset.name)
+        drawn = ", ".join(f"{key} {_short(record['values'][key])}" for key in varied[:3] if key in record["values"])
+        samples.append((volume, labels, record.get("labels", {}), f"sample {index:05d} ({record['split']}): {drawn}"))
+    write_gallery(root / GALLERY_NAME, samples)
+
+
+def _short(value) -> str:
+    return f"{value:.3g}" if isinstance(value, float) else str(value)
 
 
 # -- running the samples -----------------------------------------------------------------------
