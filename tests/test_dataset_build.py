@@ -8,6 +8,7 @@ import csv
 import hashlib
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -293,3 +294,56 @@ def test_a_hundred_samples_in_one_worker_keep_its_memory_steady(gl, cl, tmp_path
     print(f"resident memory after samples 10, 50, 100: {rss[9] / 2**20:.0f}, {rss[49] / 2**20:.0f}, "
           f"{rss[99] / 2**20:.0f} MiB")
     assert abs(rss[99] - rss[9]) <= 0.10 * rss[99]
+
+
+def test_an_nnunet_build_loads_with_nibabel_at_its_voxel_size(gl, cl, tmp_path):
+    nib = pytest.importorskip("nibabel", reason="the dataset extra (pip install \"xrayraster[dataset]\")")
+    report = xr.build(tiny(tmp_path, count=3, layout="nnunet"), tmp_path / "out")
+    assert report.built == (0, 1, 2)
+    meta = json.loads((tmp_path / "out" / "dataset.json").read_text())
+    assert meta["channel_names"] == {"0": "CT"} and meta["file_ending"] == ".nii.gz"
+    assert meta["labels"] == {"background": 0, "matrix": 1, "weft": 2, "warp": 3}
+    images = sorted((tmp_path / "out").glob("images*/*_0000.nii.gz"))
+    assert len(images) == 3 and meta["numTraining"] == len(list((tmp_path / "out").glob("imagesTr/*.nii.gz")))
+    for image in images:
+        case = image.name.removesuffix("_0000.nii.gz")
+        label = image.parent.parent / image.parent.name.replace("images", "labels") / f"{case}.nii.gz"
+        img, lab = nib.load(image), nib.load(label)
+        assert img.header.get_zooms() == pytest.approx((0.46, 0.46, 0.46)) == lab.header.get_zooms()
+        assert img.shape == lab.shape == (32, 32, 16)  # x, y, z
+        assert set(np.unique(np.asarray(lab.dataobj))) <= set(meta["labels"].values())
+
+
+def test_kept_projections_and_meshes_go_with_their_sample(gl, cl, tmp_path):
+    path = tiny(tmp_path, count=1, extra='keep = ["projections", "meshes"]')
+    xr.build(path, tmp_path / "out")
+    sample = tmp_path / "out" / "samples" / "00000"
+    projections = xr.Projections.load(sample / "projections.tif")
+    assert projections.data.shape == (20, 16, 32) and projections.quantity == "lineint"
+    meshes = sorted(p.name for p in (sample / "meshes").iterdir())
+    assert {"matrix.stl", "weft.stl", "warp.stl", "report.json"} <= set(meshes)
+
+
+def test_the_plan_and_bad_files_do_no_work(tmp_path, capsys):
+    assert cli.main(["build", str(tiny(tmp_path, count=3)), "--plan"]) == 0
+    plan = capsys.readouterr().out
+    rows = [line for line in plan.splitlines() if re.match(r"\d+\s+(train|val|test)\s", line)]
+    assert "source.kvp" in plan and len(rows) == 3 and "3 samples" in plan
+    bad = tiny(tmp_path)
+    bad.write_text(bad.read_text().replace('"source.kvp"', '"source.kpv"'))
+    assert cli.main(["build", str(bad), "-o", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "source.kpv" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["tiny.toml"]
+
+
+def test_a_build_that_cannot_fit_on_the_disk_is_refused_before_the_first_sample(tmp_path, monkeypatch, capsys):
+    import shutil as shutil_module
+
+    real = shutil_module.disk_usage
+    monkeypatch.setattr("xrayraster.pipeline.dataset.shutil.disk_usage",
+                        lambda path: real(path)._replace(free=100_000))
+    assert cli.main(["build", str(tiny(tmp_path)), "-o", str(tmp_path / "out"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "GiB free" in err and "4 samples" in err
+    assert not (tmp_path / "out" / "samples").exists()

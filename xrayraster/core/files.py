@@ -185,26 +185,33 @@ def probe_writable(directory: Path, out: Path) -> None:
                 pass
 
 
-def check_output_directory(path, *, marker: str, generator: str, overwrite: bool = False,
-                           names=()) -> Path:
-    """Refuse, before any work, an output directory ``generator`` may not write
-    (:mod:`~xrayraster.core.ownership`). Returns ``path`` with links resolved.
-
-    Refused: a name with a file suffix (``out.tif``); a parent that cannot be written
-    (:func:`probe_writable`); an existing file; a directory holding foreign entries, unless
-    ``overwrite``; with ``overwrite``, a foreign entry named as one of ``names`` (the files the
-    command will write, as far as known). The message names the entries, clashes first.
-    """
+def directory_target(path, generator: str) -> Path:
+    """Where an output directory named ``path`` goes (links resolved), refusing, before any work, a
+    name with a file suffix (``-o out.tif``), a parent that cannot be written (:func:`probe_writable`)
+    and an existing file."""
     path = Path(path)
     if path.suffix.lower() in FILE_SUFFIXES:
         raise ConfigError(f"{path}: {generator} writes a directory, and this name ends in {path.suffix} like a file; "
                           f"give a directory name such as {path.with_suffix('')}")
     target = resolved_output(path)
     probe_writable(target.parent, path)
+    if target.exists() and not target.is_dir():
+        raise ConfigError(f"{path} is a file, not a directory; {generator} writes a directory: choose another name")
+    return target
+
+
+def check_output_directory(path, *, marker: str, generator: str, overwrite: bool = False,
+                           names=()) -> Path:
+    """Refuse, before any work, an output directory ``generator`` may not write
+    (:mod:`~xrayraster.core.ownership`). Returns ``path`` with links resolved.
+
+    Refused: what :func:`directory_target` refuses; a directory holding foreign entries, unless
+    ``overwrite``; with ``overwrite``, a foreign entry named as one of ``names`` (the files the
+    command will write, as far as known). The message names the entries, clashes first.
+    """
+    target = directory_target(path, generator)
     if not target.exists():
         return target
-    if not target.is_dir():
-        raise ConfigError(f"{path} is a file, not a directory; {generator} writes a directory: choose another name")
     _, foreign = directory_entries(target, marker, generator)
     if not foreign:
         return target

@@ -35,14 +35,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..core.errors import ConfigError, XrayrasterError
-from ..core.files import atomic_write_text, probe_writable, remove_stale_temporaries_in
-from ..core.ownership import FILE_SUFFIXES, resolved_output
+from ..core.files import atomic_write_text, directory_target, remove_stale_temporaries_in
 from ..core.pictures import write_gallery
 from ..core.provenance import package_version
 from ..io.dataset_layout import LAYOUTS
 from .dataset_file import DatasetFile, differences, draw, fingerprint, identity, load_dataset_file
 from .dataset_plan import sample_bytes
 from .distributions import Fixed
+from .scan import scan
+from .woven import weave
 
 __all__ = ["BuildReport", "build", "build_sample"]
 
@@ -80,8 +81,7 @@ def build(config, directory, *, workers: int = 1, dask: bool = False, scheduler:
         raise ConfigError(f"workers must be a whole number >= 1, got {workers!r}")
     root = _prepare(dataset, directory, force)
     layout = LAYOUTS[dataset.layout]
-    for folder in [root, *(p for p in root.rglob("*") if p.is_dir() and not p.name.startswith("."))]:
-        remove_stale_temporaries_in(folder)  # what a killed build left
+    _sweep(root)  # what a killed build left
     finished = layout.finished(root, dataset.name)
     todo = [i for i in range(dataset.count) if i not in finished]
     _check_disk(dataset, root, todo)
@@ -98,8 +98,7 @@ def build(config, directory, *, workers: int = 1, dask: bool = False, scheduler:
                 log.info("sample %05d  seed %d  %.1f s  %s", summary["index"], summary["seed"], summary["seconds"],
                          "  ".join(f"{k} {v:.3f}" for k, v in summary["fractions"].items()))
     finally:
-        for folder in [root, *(p for p in root.rglob("*") if p.is_dir() and not p.name.startswith("."))]:
-            remove_stale_temporaries_in(folder)  # the pool's, when it was stopped
+        _sweep(root)  # the pool's, when it was stopped
         records = layout.finished(root, dataset.name)
         layout.write_index(root, records, name=dataset.name, labels=_labels(records))
         _write_failed(root, dataset, failed)
@@ -111,9 +110,6 @@ def build(config, directory, *, workers: int = 1, dask: bool = False, scheduler:
 def build_sample(dataset: DatasetFile, root, index: int, threads: int | None = None) -> dict:
     """Draw, scan and write sample ``index`` (one task, in whichever process runs it); returns a
     summary for the log: index, seed, wall seconds and the share of each label by name."""
-    from .scan import scan
-    from .woven import weave
-
     start = time.perf_counter()
     drawn = draw(dataset, index)
     for reason in drawn.redraws:
@@ -141,16 +137,16 @@ def _steady(metadata: dict) -> dict:
 # -- the directory -----------------------------------------------------------------------------
 
 
+def _sweep(root: Path) -> None:
+    """Remove the stale temporaries (their writers gone) in ``root`` and its visible folders."""
+    for folder in [root, *(p for p in root.rglob("*") if p.is_dir() and not p.name.startswith("."))]:
+        remove_stale_temporaries_in(folder)
+
+
 def _prepare(dataset: DatasetFile, directory, force: bool) -> Path:
     """The dataset directory, checked and recorded before any work (module docstring)."""
     path = Path(directory)
-    if path.suffix.lower() in FILE_SUFFIXES:
-        raise ConfigError(f"{path}: a build writes a directory, and this name ends in {path.suffix} like a file; "
-                          f"give a directory name such as {path.with_suffix('')}")
-    root = resolved_output(path)
-    probe_writable(root.parent, path)
-    if root.exists() and not root.is_dir():
-        raise ConfigError(f"{path} is a file, not a directory; choose another name")
+    root = directory_target(path, GENERATOR)
     if root.is_dir() and any(root.iterdir()):
         earlier = _read_record(root)
         if earlier is None:
