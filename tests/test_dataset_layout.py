@@ -358,3 +358,20 @@ def test_read_sample_gives_back_what_was_written(tmp_path, layout):
         volume, labels = LAYOUTS[layout].read_sample(tmp_path, index, split, NAME)
         assert volume.dtype == np.float32 and labels.dtype == np.uint8
         assert np.array_equal(volume, scanned.volume.data) and np.array_equal(labels, scanned.labels.data)
+
+
+@pytest.mark.parametrize("layout", ["nnunet", "hdf5"])
+def test_files_of_an_unfinished_sample_are_removed_and_nothing_else(tmp_path, layout):
+    """A kill between an nnU-Net sample's renames leaves its image and labels without a record, and
+    one after a sample's extras leaves them without the sample: remove_unfinished takes those away,
+    and only those, so a stopped build shows no partial sample."""
+    write_three(layout, tmp_path)
+    (tmp_path / "notes.txt").write_text("not a sample's")
+    before = visible_files(tmp_path)
+    stray = LAYOUTS[layout].sample_paths(7, "train", NAME)[:-1]  # all but the last file renamed in
+    stray.append(f"extras/{NAME}_00007/mesh.stl" if layout == "nnunet" else "extras/00007/mesh.stl")
+    for path in stray:
+        (tmp_path / path).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / path).write_bytes(b"written before the kill")
+    assert len(LAYOUTS[layout].remove_unfinished(tmp_path, NAME)) == len(stray)
+    assert visible_files(tmp_path) == before

@@ -25,6 +25,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import shutil
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable, Protocol
@@ -92,6 +93,10 @@ class DatasetLayout(Protocol):
     def read_sample(self, root: Path, index: int, split: str, name: str) -> tuple[np.ndarray, np.ndarray]:
         """(volume float32 cm⁻¹, labels uint8), both (z, y, x), of a complete sample, as written."""
 
+    def remove_unfinished(self, root: Path, name: str) -> list[Path]:
+        """Remove the visible files of samples a killed writer left unfinished (the runner calls it
+        before a build resumes); returns them. Hidden temporaries are the runner's sweep's."""
+
 
 def sample_id(index: int) -> str:
     """The sample's number in file names: five digits, more when needed (``00042``, ``123456``)."""
@@ -155,6 +160,14 @@ def _read_json(path: Path) -> dict | None:
     except (OSError, ValueError):
         return None
     return document if isinstance(document, dict) and document.get("generator") == GENERATOR else None
+
+
+def _remove_stray_extras(root: Path, pattern: str, done: dict) -> list[Path]:
+    """Remove ``root/extras`` folders (named by ``pattern``, group 1 the index) of unfinished samples."""
+    stray = [path for index, path in _visible(root / "extras", pattern) if index not in done]
+    for path in stray:
+        shutil.rmtree(path)
+    return stray
 
 
 def _visible(directory: Path, pattern: str) -> list[tuple[int, Path]]:
@@ -228,6 +241,9 @@ class TiffLayout:
     def sample_paths(self, index, split, name) -> list[str]:
         return [f"samples/{sample_id(index)}/{file}" for file in (VOLUME_TIF, LABELS_TIF, SAMPLE_JSON)]
 
+    def remove_unfinished(self, root, name) -> list[Path]:
+        return []  # the sample's folder, extras inside, appears by one rename, whole
+
     def read_sample(self, root, index, split, name) -> tuple[np.ndarray, np.ndarray]:
         import tifffile
 
@@ -250,6 +266,17 @@ class NnunetLayout:
     def sample_paths(self, index, split, name) -> list[str]:
         case, part = self.case(index, name), "Tr" if split in TRAINING_SPLITS else "Ts"
         return [f"images{part}/{case}_0000.nii.gz", f"labels{part}/{case}.nii.gz", f"records/{case}.json"]
+
+    def remove_unfinished(self, root, name) -> list[Path]:
+        # A sample's image, labels and record are renamed into place one after another, the record
+        # last: a kill between the renames leaves an image or labels whose case has no record.
+        root, done = Path(root), self.finished(root, name)
+        pattern = rf"{re.escape(name)}_(\d+)(?:_0000)?\.nii\.gz"
+        stray = [path for folder in ("imagesTr", "imagesTs", "labelsTr", "labelsTs")
+                 for index, path in _visible(root / folder, pattern) if index not in done]
+        for path in stray:
+            path.unlink()
+        return stray + _remove_stray_extras(root, rf"{re.escape(name)}_(\d+)", done)
 
     def read_sample(self, root, index, split, name) -> tuple[np.ndarray, np.ndarray]:
         nib = optional_module("nibabel", "dataset", "reading NIfTI files")
@@ -315,6 +342,10 @@ class Hdf5Layout:
 
     def sample_paths(self, index, split, name) -> list[str]:
         return [f"samples/{sample_id(index)}.h5"]
+
+    def remove_unfinished(self, root, name) -> list[Path]:
+        # The file appears by one rename, whole; its extras, written first, may be left without it.
+        return _remove_stray_extras(Path(root), r"(\d+)", self.finished(root, name))
 
     def read_sample(self, root, index, split, name) -> tuple[np.ndarray, np.ndarray]:
         h5py = optional_module("h5py", "dataset", "reading HDF5 files")

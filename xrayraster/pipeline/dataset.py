@@ -81,7 +81,9 @@ def build(config, directory, *, workers: int = 1, dask: bool = False, scheduler:
         raise ConfigError(f"workers must be a whole number >= 1, got {workers!r}")
     root = _prepare(dataset, directory, force)
     layout = LAYOUTS[dataset.layout]
-    _sweep(root)  # what a killed build left
+    _sweep(root)  # what a killed build left: temporaries, and the files of samples it did not finish
+    for path in layout.remove_unfinished(root, dataset.name):
+        log.info("removed %s: its sample was not finished", path)
     finished = layout.finished(root, dataset.name)
     todo = [i for i in range(dataset.count) if i not in finished]
     _check_disk(dataset, root, todo)
