@@ -116,7 +116,7 @@ def build_sample(dataset: DatasetFile, root, index: int, threads: int | None = N
     drawn = draw(dataset, index)
     for reason in drawn.redraws:
         log.info("sample %05d redrawn: %s", index, reason)
-    gl, cl = _worker_contexts()
+    gl, cl = _worker_contexts(threads)
     keep_projections = "projections" in dataset.keep
     result = scan(drawn.scan, gl=gl, cl=cl, threads=threads, keep_projections=keep_projections)
     names = {k: v for k, v in result.metadata["labels"].items() if k != "0"}
@@ -288,7 +288,7 @@ def _on_pool(dataset, root, todo, workers):
 
     threads = max(1, (os.cpu_count() or 1) // workers)
     context = multiprocessing.get_context("spawn")  # GL and OpenCL state does not survive a fork
-    pool = context.Pool(workers, initializer=_init_worker, initargs=(threads,), maxtasksperchild=None)
+    pool = context.Pool(workers, initializer=_init_worker)
     try:
         pending = [pool.apply_async(_attempt, (dataset, root, index, threads)) for index in todo]
         while pending:
@@ -309,7 +309,9 @@ def _on_dask(dataset, root, todo, workers, scheduler):
         from distributed import Client, LocalCluster, as_completed
     except ImportError:
         raise ConfigError("building on Dask needs the dask extra: pip install \"xrayraster[dask]\"") from None
-    threads = max(1, (os.cpu_count() or 1) // workers)
+    # A LocalCluster's workers share this machine; a cluster's own workers know their machines, and
+    # their threads are set where they are started (docs/dataset.md).
+    threads = None if scheduler else max(1, (os.cpu_count() or 1) // workers)
     cluster = None if scheduler else LocalCluster(n_workers=workers, threads_per_worker=1, processes=True)
     client = Client(scheduler or cluster)
     try:
@@ -328,20 +330,24 @@ def _on_dask(dataset, root, todo, workers, scheduler):
 _contexts = None
 
 
-def _init_worker(threads: int) -> None:
-    """A pool worker: Ctrl-C is the parent's to handle; GL's and OpenCL's CPU threads its share."""
+def _init_worker() -> None:
+    """A pool worker: Ctrl-C is the parent's to handle (it stops the pool)."""
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    os.environ.setdefault("LP_NUM_THREADS", str(threads))  # llvmpipe's rasteriser threads
-    os.environ.setdefault("POCL_MAX_PTHREAD_COUNT", str(threads))  # PoCL's CPU device
 
 
-def _worker_contexts():
+def _worker_contexts(threads: int | None):
+    """This process's GL and OpenCL contexts, made on its first sample. A worker sharing the machine
+    (``threads``: its share of the cores) first caps the CPU threads llvmpipe and PoCL start, which
+    they read once, when the first context is made; a variable the user set is left as it is."""
     global _contexts
     if _contexts is None:
         from ..gl.context import GLContext
         from ..recon.opencl import CLContext
 
+        if threads is not None:
+            os.environ.setdefault("LP_NUM_THREADS", str(threads))  # llvmpipe's rasteriser threads
+            os.environ.setdefault("POCL_MAX_PTHREAD_COUNT", str(threads))  # PoCL's CPU device
         _contexts = (GLContext(), CLContext())
     return _contexts
