@@ -1,6 +1,6 @@
 """Dataset builds: samples per hour at 128³ and 256³ with 1 and 2 workers and on Dask, and where a sample's time goes.
 
-    python -m scripts.bench_dataset            # 128³: 8 samples a mode; 256³: 3 a mode (~10 min on 2 cores)
+    python -m scripts.bench_dataset            # 128³: 8 samples a mode; 256³: 4 a mode (~12 min on 2 cores)
     python -m scripts.bench_dataset --quick    # 128³ only, 4 samples, one worker (~30 s)
 
 The samples are the reference twin's small version (``examples/twin_small.toml``: 2 × 2 woven
@@ -38,7 +38,7 @@ from .common import OUT, ROOT, announce, conclude, outputs, parser, pyplot, say
 
 SIZES = {  # name: (views, detector pixels across, pixel size mm, voxels across, voxel size mm, samples)
     "128": (180, 128, 0.539467, 128, 0.2312, 8),
-    "256": (360, 256, 0.2697335, 256, 0.1156, 3),
+    "256": (360, 256, 0.2697335, 256, 0.1156, 4),
 }
 MODES = {"1 worker": {"workers": 1}, "2 workers": {"workers": 2}, "Dask, 2 workers": {"workers": 2, "dask": True}}
 

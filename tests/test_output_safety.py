@@ -21,22 +21,11 @@ from xrayraster import cli
 from xrayraster.io.weave_file import load_weave_file
 from xrayraster.pipeline.compare import write_histogram_png
 
+from test_weave_export import WEAVE_TOML as WEAVE  # a one-cell weave that meshes in a fraction of a second
+
 ROOT = Path(__file__).resolve().parent.parent
 SCAN = ROOT / "examples" / "scan_small.toml"
 SCENE = ROOT / "examples" / "bracket_and_ball.toml"
-WEAVE = """
-[weave]
-weft_per_layer = 4
-weft_layers = 3
-warp_positions = 2
-thickness = 2.8
-margin_z = 0.4
-
-[weave.sample]
-cells = [1, 1]
-points_per_section = 12
-samples_per_mm = 2.0
-"""
 # The names the commands write, each present as the user's own file.
 TOOL_NAMES = ("volume.tif", "labels.tif", "projections.tif", "radiograph.tif", "scan.json", "report.json",
               "compare.json", "slices.png", "volume.png", "histograms.png", "matrix.stl", "weft.stl", "warp.stl",

@@ -298,9 +298,12 @@ def _on_pool(dataset, root, todo, workers):
                 yield p.get()
             if not done:
                 time.sleep(0.05)
+    except BaseException:  # Ctrl-C, an error, or the caller stopped: the workers stop now
+        pool.terminate()  # (their temporaries are then stale, for the build's sweep)
+        raise
+    else:
         pool.close()
     finally:
-        pool.terminate()  # on Ctrl-C or an error: the workers stop now; their temporaries are stale
         pool.join()
 
 
