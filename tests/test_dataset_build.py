@@ -347,3 +347,16 @@ def test_a_build_that_cannot_fit_on_the_disk_is_refused_before_the_first_sample(
     err = capsys.readouterr().err
     assert "GiB free" in err and "4 samples" in err
     assert not (tmp_path / "out" / "samples").exists()
+
+
+def test_the_readmes_dataset_command_runs_as_written(gl, cl, tmp_path):
+    """README.md's dataset command, verbatim, from a folder whose examples/ is the repository's."""
+    text = (ROOT / "README.md").read_text()
+    command = text.split("## A dataset", 1)[1].split("```bash", 1)[1].split("```", 1)[0].split("#", 1)[0].strip()
+    assert command.startswith("xrayraster build examples/dataset_small.toml -o ")
+    (tmp_path / "examples").symlink_to(ROOT / "examples")
+    run = subprocess.run(command, shell=True, cwd=tmp_path, env=child_env(), capture_output=True, text=True,
+                         timeout=300)
+    assert run.returncode == 0, run.stderr
+    out = tmp_path / command.split(" -o ", 1)[1].split()[0]
+    assert len(list(csv.DictReader(open(out / "manifest.csv")))) == 8 and (out / "gallery.png").is_file()
