@@ -21,7 +21,6 @@ from pathlib import Path
 from ..core.errors import ConfigError
 from ..core.files import probe_writable
 from ..core.ownership import check_replaceable_files
-from ..core.tiff import quicklook_path
 
 TIFF_SUFFIXES = (".tif", ".tiff")
 

@@ -14,11 +14,12 @@ from ..core.choices import FILTERS, RECONSTRUCTION_INPUTS, SCAN_KINDS
 from ..core.errors import ConfigError
 from ..core.geometry import geometry_from_dict
 from ..core.inputs import read_tiff_file
+from ..core.tiff import quicklook_path
 from ..io.scan_file import read_scan_file
 from ..recon.fdk import fdk
 from ..recon.truncation import DEFAULT_WIDTH
 from .options import add_scan_file
-from .outputs import check_outputs, quicklook_path
+from .outputs import check_outputs
 
 GEOMETRY_SOURCES = ("scan-file", "projections")
 SWITCH = {"auto": "auto", "on": True, "off": False}  # --displaced, --truncation

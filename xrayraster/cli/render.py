@@ -9,13 +9,14 @@ from pathlib import Path
 from ..core.choices import OVERLAP_MODES, RADIOGRAPH_OUTPUTS
 from ..core.errors import ConfigError
 from ..core.projections import Projections
+from ..core.tiff import quicklook_path
 from ..io.scene_file import load_scene_file
 from ..physics.detector import Detector
 from ..physics.starvation import starved_share, warn_if_starved
 from ..simulate.estimate import render_estimate
 from ..simulate.renderer import Renderer
 from .options import nonnegative_int, positive_int
-from .outputs import check_outputs, quicklook_path
+from .outputs import check_outputs
 from .views import parse_views
 
 

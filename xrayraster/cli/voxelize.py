@@ -8,11 +8,12 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.tiff import quicklook_path
 from ..gl.voxelize import fractions_path, voxelize
 from ..io.scan_file import read_scan_file
 from ..io.scene_file import load_scene_file
 from .options import add_scan_file, positive_int
-from .outputs import check_outputs, quicklook_path
+from .outputs import check_outputs
 
 
 def add_parser(subparsers) -> None:

@@ -103,10 +103,7 @@ def _remove_temporaries(paths) -> list[Path]:
     removed = []
     for tmp in paths:
         try:
-            if tmp.is_dir() and not tmp.is_symlink():
-                shutil.rmtree(tmp)  # an atomic_directory's
-            else:
-                tmp.unlink()
+            _remove_entry(tmp)  # a file, or an atomic_directory's folder
             removed.append(tmp)
         except FileNotFoundError:  # another writer of the same output removed it first
             pass
@@ -286,7 +283,7 @@ def _swap(tmp: Path, target: Path, marker: str, generator: str) -> None:
     os.replace(target, old)
     os.replace(tmp, target)
     recorded, _ = directory_entries(old, marker, generator)
-    for name in recorded:
+    for name in recorded:  # those the directory holds
         _remove_entry(old / name)
     try:
         old.rmdir()

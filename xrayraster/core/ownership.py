@@ -96,6 +96,16 @@ def _json_object(path: Path) -> dict:
     return data if isinstance(data, dict) else {}
 
 
+def read_record(path, generator: str) -> dict | None:
+    """The JSON object at ``path`` if ``generator`` wrote it (its ``"generator"`` says so), else None:
+    missing, unreadable, not a JSON object, or someone else's."""
+    try:
+        record = _json_object(Path(path))
+    except (OSError, ValueError):
+        return None
+    return record if record.get("generator") == generator else None
+
+
 def check_replaceable_files(paths) -> list[Path]:
     """Refuse, before any work, to write an output file over one xrayraster did not write.
 
@@ -119,12 +129,9 @@ def check_replaceable_files(paths) -> list[Path]:
 def recorded_names(directory, marker: str, generator: str) -> frozenset[str] | None:
     """The names an earlier output of ``generator`` recorded in ``directory/marker`` (the marker
     included), or None when the directory holds no such record."""
-    try:
-        record = _json_object(Path(directory) / marker)
-    except (OSError, ValueError):
-        return None
-    files = record.get("files")
-    if record.get("generator") != generator or not isinstance(files, list):
+    record = read_record(Path(directory) / marker, generator)
+    files = record.get("files") if record is not None else None
+    if not isinstance(files, list):
         return None
     names = {name for name in files if isinstance(name, str) and name == Path(name).name and name not in ("", ".", "..")}
     return frozenset(names | {marker})

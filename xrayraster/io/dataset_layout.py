@@ -34,6 +34,7 @@ import numpy as np
 
 from ..core.errors import ConfigError
 from ..core.files import atomic_directory, atomic_write, atomic_write_text, atomic_writes
+from ..core.ownership import read_record
 from .manifest import json_ready, write_manifest
 from .nifti import nifti_writer
 from .optional import optional_module
@@ -153,15 +154,6 @@ def _json(document) -> str:
     return json.dumps(document, indent=2, default=json_ready) + "\n"
 
 
-def _read_json(path: Path) -> dict | None:
-    """The JSON object at ``path`` if it is one of ours, else None (missing, unreadable, foreign)."""
-    try:
-        document = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return None
-    return document if isinstance(document, dict) and document.get("generator") == GENERATOR else None
-
-
 def _remove_stray_extras(root: Path, pattern: str, done: dict) -> list[Path]:
     """Remove ``root/extras`` folders (named by ``pattern``, group 1 the index) of unfinished samples."""
     stray = [path for index, path in _visible(root / "extras", pattern) if index not in done]
@@ -228,7 +220,7 @@ class TiffLayout:
     def finished(self, root, name) -> dict[int, dict]:
         done = {}
         for index, directory in _visible(Path(root) / "samples", r"(\d+)"):
-            document = _read_json(directory / SAMPLE_JSON)
+            document = read_record(directory / SAMPLE_JSON, GENERATOR)
             if document is not None and "files" in document:  # atomic_directory adds "files" last
                 done[index] = document["record"]
         return done
@@ -303,7 +295,7 @@ class NnunetLayout:
         root = Path(root)
         done = {}
         for index, path in _visible(root / "records", rf"{re.escape(name)}_(\d+)\.json"):
-            document = _read_json(path)
+            document = read_record(path, GENERATOR)
             # The record is renamed into place last; the images are checked too, as a person may
             # have removed one since.
             if document is not None and all((root / p).is_file() for p in document.get("files", ())):

@@ -36,6 +36,7 @@ from pathlib import Path
 
 from ..core.errors import ConfigError, XrayrasterError
 from ..core.files import atomic_write_text, directory_target, remove_stale_temporaries_in
+from ..core.ownership import read_record
 from ..core.pictures import write_gallery
 from ..core.provenance import package_version
 from ..io.dataset_layout import LAYOUTS
@@ -140,8 +141,10 @@ def _steady(metadata: dict) -> dict:
 
 
 def _sweep(root: Path) -> None:
-    """Remove the stale temporaries (their writers gone) in ``root`` and its visible folders."""
-    for folder in [root, *(p for p in root.rglob("*") if p.is_dir() and not p.name.startswith("."))]:
+    """Remove the stale temporaries (their writers gone) in ``root`` and its visible folders: a
+    layout writes its samples' temporaries there (``samples/.00007.…``, ``imagesTr/.…``), never
+    deeper, as a sample's own folder appears whole."""
+    for folder in [root, *(p for p in root.iterdir() if p.is_dir() and not p.name.startswith("."))]:
         remove_stale_temporaries_in(folder)
 
 
@@ -150,7 +153,7 @@ def _prepare(dataset: DatasetFile, directory, force: bool) -> Path:
     path = Path(directory)
     root = directory_target(path, GENERATOR)
     if root.is_dir() and any(root.iterdir()):
-        earlier = _read_record(root)
+        earlier = read_record(root / RECORD_NAME, GENERATOR)
         if earlier is None:
             raise ConfigError(f"{path} holds files that {GENERATOR} did not write (no {RECORD_NAME}); they are never "
                               "removed: choose another directory")
@@ -168,14 +171,6 @@ def _prepare(dataset: DatasetFile, directory, force: bool) -> Path:
               "count": dataset.count, "identity": identity(dataset)}
     atomic_write_text(root / RECORD_NAME, json.dumps(record, indent=2, sort_keys=True) + "\n")
     return root
-
-
-def _read_record(root: Path) -> dict | None:
-    try:
-        record = json.loads((root / RECORD_NAME).read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return None
-    return record if isinstance(record, dict) and record.get("generator") == GENERATOR else None
 
 
 def _remove_samples(root: Path, earlier: dict) -> None:

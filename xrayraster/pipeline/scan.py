@@ -192,6 +192,7 @@ def _project_into(stream: FDKStream, renderer: Renderer, scene, loaded: ScanFile
     total = loaded.geometry.num_views
     report, bar = _progress(progress, total)
     provenances, stacks = [], []
+    starved = covered = 0  # over the views so far, pixels the sample covers
     try:
         for first in range(0, total, stream.batch_views):
             views = list(range(first, min(first + stream.batch_views, total)))
@@ -201,10 +202,10 @@ def _project_into(stream: FDKStream, renderer: Renderer, scene, loaded: ScanFile
                                              realism=loaded.realism, spectral_table=True,
                                              progress=lambda done, _, first=first: report(first + done, total))
             provenances.append(batch.provenance)
+            starved += sum(batch.provenance["starved_covered_pixels"])
+            covered += sum(batch.provenance["covered_pixels"])
             if not allow_starved:
-                so_far = _joined(provenances)
-                refuse_if_starved(starved_share(so_far["starved_covered_pixels"], so_far["covered_pixels"]),
-                                  str(loaded.path), views[-1] + 1)
+                refuse_if_starved(starved_share([starved], [covered]), str(loaded.path), views[-1] + 1)
             with _timed(seconds, "fdk"):
                 stream.add(first, batch.data)
             if keep:

@@ -30,9 +30,10 @@ from ..core.files import atomic_write, atomic_write_text
 from ..core.provenance import package_version
 from ..scene.materials import Material
 from .manifold_mesh import box_minus, from_manifold, to_manifold, union, without_slivers
+from .yarn import PRIORITIES
 
 __all__ = [
-    "GENERATOR", "REPORT_NAME", "Part", "material_entry", "merge_meshes", "mesh_bounds", "occupied_volumes",
+    "GENERATOR", "REPORT_NAME", "Part", "export_report", "material_entry", "merge_meshes", "mesh_bounds", "occupied_volumes",
     "part_file", "settle", "write_parts", "write_report",
 ]
 
@@ -105,6 +106,33 @@ def write_parts(parts: list[Part], directory, fmt: str) -> dict[str, str]:
         atomic_write(directory / name, lambda tmp, mesh=part.mesh: mesh.export(tmp, file_type=fmt))
         files[part.name] = name
     return files
+
+
+def export_report(parts: list[Part], facts: dict, settings: dict, box, *, resolve: str, per: str,
+                  fmt: str) -> dict:
+    """The report of an export (``Sample.exported``): the sample's ``settings`` (cell, tiling,
+    resolution, seed, distortion), how it was resolved and written, the yarn counts and
+    interpenetration of ``facts`` (``Sample.parts``), every part's file, family, label, priority and
+    material, the materials, the ``box`` (mm) and the meshes' bounds, and each family's occupied
+    volume (mm³, :func:`occupied_volumes`) and fraction of the box."""
+    volumes = occupied_volumes(parts, PRIORITIES)
+    lo, hi = (np.asarray(corner, dtype=float) for corner in box)
+    box_volume = float(np.prod(hi - lo))
+    keys = [p.name if p.name in facts["tracers"] else p.family for p in parts]  # a tracer's material is its own
+    return {
+        **settings,
+        "resolve": resolve, "per": per, "format": fmt,
+        "yarns": facts["yarns"],
+        "triangles": int(sum(len(p.mesh.faces) for p in parts)),
+        "parts": [{"name": p.name, "file": part_file(p.name, fmt), "family": p.family, "label": p.label,
+                   "priority": p.priority, "material": key} for p, key in zip(parts, keys)],
+        "materials": {key: material_entry(p.material) for p, key in zip(parts, keys)},
+        "box_mm": [lo.tolist(), hi.tolist()],
+        "mesh_bounds_mm": mesh_bounds(parts),
+        "volume_mm3": {"box": box_volume, **volumes},
+        "volume_fraction": {f: v / box_volume for f, v in volumes.items()},
+        "interpenetration_mm3": facts["interpenetration_mm3"],
+    }
 
 
 def part_file(name: str, fmt: str) -> str:

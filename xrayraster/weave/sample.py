@@ -50,11 +50,8 @@ from .export import (
     GENERATOR,
     REPORT_NAME,
     Part,
-    material_entry,
+    export_report,
     merge_meshes,
-    mesh_bounds,
-    occupied_volumes,
-    part_file,
     settle,
     write_parts,
     write_report,
@@ -411,40 +408,17 @@ class Sample:
 
     def exported(self, materials=None, *, per: str = "family", fmt: str = "stl", resolve: str = "priority",
                  progress: bool = False) -> tuple[list[Part], dict]:
-        """What :meth:`export` writes, in memory: the parts (one mesh file each) and the report.
-
-        The report gives the cell, tiling, resolution, seed and distortion; yarn counts; every
-        part's file, family, label, priority and material; the materials (density g/cm³, mass
-        fractions); the box and the meshes' bounds (mm); each family's occupied volume (mm³) and
-        fraction of the box (:func:`~xrayraster.weave.export.occupied_volumes`); and the
-        interpenetration before and after resolving.
-        """
+        """What :meth:`export` writes, in memory: the parts (one mesh file each) and the report
+        (:func:`~xrayraster.weave.export.export_report`, with the seconds it took)."""
         check_choice(fmt, MESH_FORMATS, "format", WeaveError)
         start = time.perf_counter()
         parts, facts = self.parts(materials, per=per, resolve=resolve, progress=progress)
         _stage(progress, "measuring the families' volumes")
-        volumes = occupied_volumes(parts, PRIORITIES)
-        lo, hi = self.box
-        box_volume = float(np.prod(hi - lo))
-        keys = [p.name if p.name in facts["tracers"] else p.family for p in parts]  # a tracer's material is its own
-        report = {
-            "cell": self.cell.to_dict(),
-            "cells": list(self.cells), "layers_of_cells": self.layers_of_cells,
-            "points_per_section": self.points_per_section, "samples_per_mm": self.samples_per_mm,
-            "seed": self.seed, "distortion": self.distortion.to_dict(),
-            "resolve": resolve, "per": per, "format": fmt,
-            "yarns": facts["yarns"],
-            "triangles": int(sum(len(p.mesh.faces) for p in parts)),
-            "parts": [{"name": p.name, "file": part_file(p.name, fmt), "family": p.family, "label": p.label,
-                       "priority": p.priority, "material": key} for p, key in zip(parts, keys)],
-            "materials": {key: material_entry(p.material) for p, key in zip(parts, keys)},
-            "box_mm": [lo.tolist(), hi.tolist()],
-            "mesh_bounds_mm": mesh_bounds(parts),
-            "volume_mm3": {"box": box_volume, **volumes},
-            "volume_fraction": {f: v / box_volume for f, v in volumes.items()},
-            "interpenetration_mm3": facts["interpenetration_mm3"],
-            "seconds": round(time.perf_counter() - start, 3),
-        }
+        settings = {"cell": self.cell.to_dict(), "cells": list(self.cells), "layers_of_cells": self.layers_of_cells,
+                    "points_per_section": self.points_per_section, "samples_per_mm": self.samples_per_mm,
+                    "seed": self.seed, "distortion": self.distortion.to_dict()}
+        report = export_report(parts, facts, settings, self.box, resolve=resolve, per=per, fmt=fmt)
+        report["seconds"] = round(time.perf_counter() - start, 3)
         return parts, report
 
     def _materials(self, materials) -> tuple[dict, dict]:
