@@ -9,8 +9,9 @@
 layout(std430, binding = BINDING_OUTPUT) writeonly buffer Lengths { float lengths[]; };  // (channel, row, col)
 
 uniform ivec2 u_size;  // (cols, rows)
+uniform float u_fixed_scale;  // fixed-point units per mm, as the sum passes use (crossing.glsl)
 
-float acc[NUM_CHANNELS];
+uint acc[NUM_CHANNELS];
 
 void main() {
     ivec2 px = ivec2(gl_GlobalInvocationID.xy);
@@ -18,12 +19,18 @@ void main() {
     int pixel = px.y * u_size.x + px.x;
     int n = load_sorted(pixel);
     if (n < 0) return;
-    for (int c = 0; c < NUM_CHANNELS; c++) acc[c] = 0.0;
+    for (int c = 0; c < NUM_CHANNELS; c++) acc[c] = 0u;
+    // Each span adds its end minus its start in fixed point, each crossing's t rounded once: the
+    // integer sums are exact, so a channel's length has the error of its crossings' t alone (as
+    // the sum passes), not that of a float32 running sum over every span.
     int owner = -1;
+    uint previous = 0u;
     for (int i = 0; i < n; i++) {
-        if (owner >= 0) acc[object_info(uint(owner)).x] += ts[i] - ts[i - 1];
+        uint units = uint(int(round(ts[i] * u_fixed_scale)));
+        if (owner >= 0) acc[object_info(uint(owner)).x] += units - previous;
+        previous = units;
         owner = sweep(i);
     }
     int npix = u_size.x * u_size.y;
-    for (int c = 0; c < NUM_CHANNELS; c++) lengths[c * npix + pixel] = acc[c];
+    for (int c = 0; c < NUM_CHANNELS; c++) lengths[c * npix + pixel] = float(int(acc[c])) / u_fixed_scale;
 }

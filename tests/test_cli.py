@@ -231,7 +231,7 @@ def test_radiograph_metadata_describes_the_physics(radiograph_run, loaded_exampl
     assert info["materials"] == ["aluminium", "steel"]
     assert info["views"] == [0, 1, 2, 3]
     assert info["spectrum"] == loaded_example.spectrum.description and "80 kVp" in info["spectrum"]
-    assert eval(info["detector"], vars(xr)) == loaded_example.detector
+    assert eval(info["detector"], {name: getattr(xr, name) for name in xr.__all__}) == loaded_example.detector
     assert info["bins_used"] == [s.bins for s in shots] and 0 < info["bins_used"][0] <= loaded_example.spectrum.n_bins
     assert info["starved_pixels"] == [s.starved for s in shots] == [0, 0, 0, 0]
     assert info["noise"] is False and info["seed"] is None

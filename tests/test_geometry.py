@@ -24,7 +24,7 @@ from xrayraster.core.geometry import (
 )
 from xrayraster.core.volume import VolumeGeometry
 
-NAMESPACE = vars(xr)  # the public names: what a user evaluates a repr in
+NAMESPACE = {name: getattr(xr, name) for name in xr.__all__}  # what `from xrayraster import *` gives a user
 
 # The geometry of the hand-derived convention tests: rows 3, cols 4, pixel (row 0.5, col 0.25),
 # offset (row 1.0, col 2.0).

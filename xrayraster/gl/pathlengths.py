@@ -170,7 +170,8 @@ class PathLengthRenderer:
         nch = uploaded.num_channels
         lengths = self.engine.scratch("lengths", 4 * nch * rows * cols)
         with self.engine.record_lists(uploaded, view, table) as lists:
-            lists.resolve("pathlength_resolve.comp", {"NUM_CHANNELS": nch}, {"u_size": (cols, rows)}, {"output": lengths})
+            lists.resolve("pathlength_resolve.comp", {"NUM_CHANNELS": nch},
+                          {"u_size": (cols, rows), "u_fixed_scale": uploaded.fixed_scale}, {"output": lengths})
         data = np.frombuffer(lengths.read(size=4 * nch * rows * cols), dtype=np.float32)
         return data.reshape(nch, rows, cols).copy()
 
