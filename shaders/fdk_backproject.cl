@@ -106,10 +106,12 @@ __attribute__((always_inline)) inline float8 pick(float8 low, float8 high, int8 
 __attribute__((always_inline)) inline float8 window_sample(__global const float* qc, int pitch, float8 row, float fc,
                                                            float row_end) {
     // Fast path, the usual case (voxels no coarser than the magnified pixels, all 8 rows on the
-    // detector): the rows span fewer than 8, so one load at the first row and one a row later
-    // give both bilinear neighbours of every lane with a single permute each.
+    // detector): the rows' floors span at most 8, so one load at the first row and one a row
+    // later give both bilinear neighbours of every lane with a single permute each.
     const float row_min = row.s0 < row.s7 ? row.s0 : row.s7, row_max = row.s0 < row.s7 ? row.s7 : row.s0;
-    if (row_min >= 0.0f && row_max < row_end && row_max - row_min < 7.0f) {
+    // The lanes' pixel rows (floors) must lie within 8 of the first: spans up to 8 rows, as
+    // voxels of the magnified pixel size give (7 row steps of about 1), qualify.
+    if (row_min >= 0.0f && row_max < row_end && (int)row_max - (int)row_min < 8) {
         const int8 r = __builtin_convertvector(row, int8);  // floor: row ≥ 0
         const int start = (int)row_min;
         const int8 k = r - start;
