@@ -12,7 +12,6 @@
 layout(local_size_x = 64) in;
 layout(std430, binding = BINDING_LARGE) buffer Large { uint draw_count; uint draw_instances; uint draw_first; uint draw_base; uint large[]; };
 layout(std430, binding = BINDING_LARGE_CORNERS) writeonly buffer LargeCorners { vec2 large_corners[]; };
-layout(std430, binding = BINDING_LARGE_POINTS) writeonly buffer LargePoints { vec2 large_points[]; };
 
 uniform uint u_num_triangles;
 
@@ -22,9 +21,9 @@ void main() {
     if (index >= u_num_triangles) return;
     Triangle tri = fetch_triangle(index);
     if (object_info(tri.object).y == 0u) return;  // behind the source in this view
-    vec2 p[3] = vec2[3](to_pixel(tri.a), to_pixel(tri.b), to_pixel(tri.c));
-    vec2 lo = min(p[0], min(p[1], p[2])) + u_half_detector;  // window coordinates
-    vec2 hi = max(p[0], max(p[1], p[2])) + u_half_detector;
+    vec2 p[3] = vec2[3](to_window(tri.a), to_window(tri.b), to_window(tri.c));
+    vec2 lo = min(p[0], min(p[1], p[2]));
+    vec2 hi = max(p[0], max(p[1], p[2]));
     float m = margin(lo, hi);
     ivec2 first, last;
     pixel_range(lo - m, hi + m, first, last);
@@ -33,20 +32,16 @@ void main() {
     if (n.x * n.y > MAX_SMALL_PIXELS) {
         uint slot = atomicAdd(draw_count, 6u) / 6u;
         large[slot] = index;
-        // Pass 2 tests with these very values, so a corner shared with a triangle tested here
-        // is the same float32 pair in both.
-        for (int k = 0; k < 3; ++k) large_points[3u * slot + uint(k)] = p[k];
-        vec2 window[3] = vec2[3](p[0] + u_half_detector, p[1] + u_half_detector, p[2] + u_half_detector);
         vec2 corners[6];
-        grown_primitives(window, m, corners);
+        grown_primitives(p, m, corners);
         for (int k = 0; k < 6; ++k) large_corners[6u * slot + uint(k)] = corners[k];
         return;
     }
     for (int y = first.y; y <= last.y; ++y) {
         for (int x = first.x; x <= last.x; ++x) {
-            vec2 q = pixel_offset(vec2(x, y) + 0.5);
-            int side = cross_projected(p, q);
-            if (side != 0) record_crossing(ivec2(x, y), tri.object, side, crossing_distance(pixel_ray(q), tri.a, tri.b, tri.c));
+            float t;
+            int side = hit_triangle(pixel_ray(vec2(x, y) + 0.5), tri.a, tri.b, tri.c, t);
+            if (side != 0) record_crossing(ivec2(x, y), tri.object, side, t);
         }
     }
 }

@@ -24,12 +24,9 @@ Triangle fetch_triangle(uint index) {
     return Triangle(a.xyz, corner(3u * index + 1u).xyz, corner(3u * index + 2u).xyz, floatBitsToUint(a.w));
 }
 
-// Offset (c', r') from the detector centre of a point's projection. The only projection of
-// corners the crossing tests use: a corner shared by two triangles must project to the same
-// float32 values in both (ray.glsl's cross_projected).
-vec2 to_pixel(vec3 x) {
-    precise vec3 h = vec4(x, 1.0) * u_world_to_pixel;
-    return h.xy / h.z;
+vec2 to_window(vec3 x) {
+    vec3 h = vec4(x, 1.0) * u_world_to_pixel;
+    return h.xy / h.z + vec2(u_size) * 0.5;
 }
 
 // Margin (px) by which a projected triangle with window box [lo, hi] is grown: the

@@ -16,7 +16,7 @@
 layout(std430, binding = BINDING_OUTPUT) writeonly buffer Labels { uint words[]; };      // (slice / LABELS_PER_WORD, row, col)
 
 uniform ivec2 u_size;   // voxel columns (nx, ny)
-uniform float u_t0;     // the slab's first voxel centre: mm along +z from the plane z = ref.z
+uniform float u_t0;     // the slab's first voxel centre: mm along +z from the rays' origin plane
 uniform float u_dt;     // voxel size along z, mm
 uniform int u_slices;   // slices in the slab, a multiple of LABELS_PER_WORD
 

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 BINDINGS = {
     "output": 1,  # what a resolve pass writes: path lengths, or packed labels
-    "large_points": 2,  # the projected corners (pixel offsets) of the large triangles, for their exact test
     "large": 3,  # indirect draw command + the triangles the rasteriser draws
     "accumulators": 4,  # fixed-point sums (channel, row, col); sum passes only
     "heads": 4,  # per-pixel list heads; overlap passes only

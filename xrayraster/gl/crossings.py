@@ -1,22 +1,17 @@
 """The crossing engine: every exact crossing of a view's rays with a scene's triangles.
 
 Every crossing of a pixel's ray (source → pixel centre, or the parallel ray) with a triangle is
-found by an exact, watertight test in projected space (``shaders/ray.glsl``): the ray crosses the
-triangle exactly when its pixel centre lies in the triangle's projection, decided by float32 edge
-functions with a tie rule, never by the rasteriser's coverage rules, so its sub-pixel snapping
-never decides which triangle a ray hits. Each corner is projected once per triangle by the same
-code, so the two triangles of a shared edge see bit-identical corners and no ray slips through
-or is counted twice. Positions are relative to the scene's reference point and distances along
-a ray are measured from the plane through it (``xrayraster/gl/rays.py``), so the error does not
-grow with the source distance. (The ray-space test of Woop, Benthin and Wald, which this engine
-used before, gave the same crossings at 2.5× the cost per pixel on llvmpipe.) Two passes find
-the candidate pixels:
+found by an exact, watertight float32 ray-triangle test (``shaders/ray.glsl``), never by the
+rasteriser's coverage rules, so its sub-pixel snapping never decides which triangle a ray hits.
+Distances are measured from a point beside the scene, not from the source
+(``xrayraster/gl/rays.py``), so the error does not grow with the source distance. Two passes
+find the candidate pixels:
 
-1. a compute pass over all triangles (``shaders/pathlength_small.comp``) projects each triangle;
-   one whose projected box holds at most ``small_triangle_pixels`` pixel centres is tested
-   against each of them, and the larger triangles are listed with their projected corners;
+1. a compute pass over all triangles (``shaders/pathlength_small.comp``) tests a triangle whose
+   projected box holds at most ``small_triangle_pixels`` pixel centres against each of them,
+   and lists the larger triangles;
 2. the rasteriser draws each listed triangle grown by a margin (``shaders/grow.glsl``), and the
-   fragment stage runs the exact test, on pass 1's corners, for every pixel it covers.
+   fragment stage runs the exact test for every pixel it covers.
 
 Dense meshes of sub-pixel triangles (most real scans) are cheaper in pass 1, whose cost is per
 triangle and parallel on every core; large triangles in pass 2, whose cost is per pixel.
@@ -67,7 +62,6 @@ class UploadedScene:
     objects: moderngl.Texture  # RGBA32UI per object: channel, drawn in this view, container channel + 1, label
     large: moderngl.Buffer  # indirect draw command + indices of the triangles pass 2 draws
     large_corners: moderngl.Buffer  # the six window-space corners pass 2 draws for each
-    large_points: moderngl.Buffer  # the three projected corners pass 2 tests each pixel against
     ranked: list  # SceneObjects by rank
     channels: np.ndarray  # channel of each object, by rank
     num_channels: int
@@ -76,7 +70,7 @@ class UploadedScene:
     corners: np.ndarray  # (8, 3) bounding-box corners relative to ref
 
     def release(self) -> None:
-        for buffer in (self.triangles, self.objects, self.large, self.large_corners, self.large_points):
+        for buffer in (self.triangles, self.objects, self.large, self.large_corners):
             buffer.release()
 
 
@@ -139,7 +133,6 @@ class CrossingEngine:
             objects=self._texture(_texel_rows(len(ranked), 4, np.uint32), "u4", f"the scene's {len(ranked)} objects"),
             large=ctx.buffer(reserve=4 * (4 + num_triangles)),
             large_corners=ctx.buffer(reserve=6 * 8 * num_triangles),
-            large_points=ctx.buffer(reserve=3 * 8 * num_triangles),
             ranked=ranked,
             channels=np.array([materials.index(o.material) for o in ranked], np.uint32),
             num_channels=len(materials),
@@ -217,7 +210,6 @@ class CrossingEngine:
             "u_direction": rays.direction,
             "u_world_to_pixel": rays.world_to_pixel,
             "u_half_detector": (cols / 2.0, rows / 2.0),
-            "u_facing": rays.facing,
             "u_size": (cols, rows),
             "u_num_triangles": uploaded.num_triangles,
             "u_snap_margin": self._snap_margin,
@@ -226,7 +218,7 @@ class CrossingEngine:
             set_uniforms(prog, uniforms)
         for name in ("triangles", "objects"):
             getattr(uploaded, name).use(TEXTURES[name])
-        for name in ("large", "large_corners", "large_points"):
+        for name in ("large", "large_corners"):
             getattr(uploaded, name).bind_to_storage_buffer(BINDINGS[name])
         uploaded.large.write(np.array([0, 1, 0, 0], np.uint32).tobytes())  # empty draw command
         groups = (uploaded.num_triangles + 63) // 64
@@ -363,7 +355,7 @@ class CrossingLists:
 
     @property
     def ref(self) -> np.ndarray:
-        """(3,) mm: a crossing's ``t`` is its distance from the plane through this point normal to its ray."""
+        """(3,) mm: crossing distances ``t`` are measured from this point's rays' origin plane."""
         return self.scene.ref
 
     def resolve(self, shader: str, defines: dict, uniforms: dict, outputs: dict[str, moderngl.Buffer]) -> None:

@@ -11,9 +11,7 @@ For pixel offsets ``(c', r')`` from the detector centre (in pixels):
 * ray origin ``Q − ref = (N0 + c'·Nu + r'·Nv) / (m0 + c'·mu + r'·mv)``
 * ray direction ``∝ D0 + c'·Du + r'·Dv``
 * pixel of a point X: ``h = P · (X − ref, 1)``, ``c' = h0/h2``, ``r' = h1/h2``; ``h2 > 0`` in
-  front of the source (cone beam) and ``h2 = 1`` for a parallel beam;
-* ``facing``: whether (u, v, ray direction) is a right-handed frame, which decides whether a
-  triangle wound counter-clockwise on the detector is entered or left.
+  front of the source (cone beam) and ``h2 = 1`` for a parallel beam.
 """
 
 from __future__ import annotations
@@ -33,7 +31,6 @@ class ViewRays:
     origin_den: np.ndarray  # (3,): m0, mu, mv
     direction: np.ndarray  # (3, 3): rows D0, Du, Dv
     world_to_pixel: np.ndarray  # (3, 4)
-    facing: float  # +1 when (u, v, ray direction) is a right-handed frame, −1 when left-handed
 
 
 def view_rays(vec: VectorGeometry, view: int, ref) -> ViewRays:
@@ -60,7 +57,7 @@ def _cone(src, d, u, v, ref) -> ViewRays:
     basis = np.column_stack([u, v, d0])
     inv = np.linalg.inv(basis)
     w2p = np.column_stack([inv, inv @ to_ref])
-    return ViewRays(num, den, direction, w2p, _handedness(basis))
+    return ViewRays(num, den, direction, w2p)
 
 
 def _parallel(ray, d, u, v, ref) -> ViewRays:
@@ -73,10 +70,4 @@ def _parallel(ray, d, u, v, ref) -> ViewRays:
     w2p[:2, :3] = inv[:2]
     w2p[:2, 3] = -(inv @ (d - ref))[:2]
     w2p[2, 3] = 1.0
-    return ViewRays(num, np.array([1.0, 0.0, 0.0]), np.stack([r, np.zeros(3), np.zeros(3)]), w2p, _handedness(basis))
-
-
-def _handedness(basis: np.ndarray) -> float:
-    """+1 or −1: the orientation of the frame (u, v, ray direction), which maps a triangle's
-    winding on the detector to whether the ray enters or leaves through it."""
-    return float(np.sign(np.linalg.det(basis)))
+    return ViewRays(num, np.array([1.0, 0.0, 0.0]), np.stack([r, np.zeros(3), np.zeros(3)]), w2p)

@@ -199,7 +199,7 @@ def _label_tile(scene: Scene, volume: VolumeGeometry, out: np.ndarray, gl: GLCon
             uploaded = engine.upload(scene)
             words = engine.scratch("output", 4 * ny * nx * (slices // per_word))
             with engine.record_lists(uploaded, 0, engine.object_table(uploaded, 0, skip=outside)) as lists:
-                t_first = float(z[0] - lists.ref[2])  # t of slice 0: mm along +z from the plane z = ref.z
+                t_first = float(z[0] - lists.ref[2])  # t of slice 0, mm from the rays' origin plane
                 for k0 in range(first, last, slices):
                     count = min(slices, last - k0)
                     padded = -(-count // per_word) * per_word
