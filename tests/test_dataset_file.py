@@ -185,6 +185,11 @@ BAD = [
     ({"vary": {"geometry.num_views.x": 4}}, r"'geometry.num_views.x': the base scan's geometry.num_views is 12, not a"),
     ({"vary": {"geometry.detector_offset.x": 4}}, r"'geometry.detector_offset.x': geometry.detector_offset is a value"),
     ({"vary": {"objects.0.mesh": "a.stl"}}, r"'objects.0.mesh': objects is an array of tables"),
+    ({"vary": {"pose.tilt_deg.2": {"uniform": [-1.0, 1.0]}}}, r"'pose.tilt_deg.2': pose.tilt_deg is a value.*give the "
+     r"array in the base scan \(pose.tilt_deg = \[...\]\)"),
+    ({"vary": {"geometry.detector_shape.2": 4}}, r"'geometry.detector_shape.2': the base scan's geometry.detector_shape "
+     r"has 2 entries; name one by its index, 0 to 1 \(got '2'\)"),
+    ({"vary": {"geometry.detector_shape": [16, 32], "geometry.detector_shape.0": 8}}, r"'geometry.detector_shape.0' lies inside"),
     ({"vary": {"weave.sample": {"choice": [{}]}, "weave.sample.seed": 1}}, r"'weave.sample.seed' lies inside"),
     ({"vary": {"source.kvp": {"uniform": [40, 41], "clip": [40, 41]}}}, r"'source.kvp': unknown key\(s\) clip"),
     ({"vary": {"source.kvp": {"uniform": [40, 41], "integer": [1, 2]}}}, r"'source.kvp' must give exactly one"),
@@ -269,9 +274,27 @@ def test_plan_rows(dataset):
     assert "scan.filter" in text and "3 samples" in text and len(text.splitlines()) == 5
 
 
+def test_an_entry_of_an_array_is_drawn_apart_from_the_others():
+    """"pose.tilt_deg.2" varies the tilt about z alone: drawn in its range per sample, the other
+    entries the base's, and the scan file posed with it."""
+    data = table(vary={"pose.tilt_deg.2": {"uniform": [-1.6, 1.6]}, "pose.offset_mm.0": {"uniform": [-0.26, 0.26]}})
+    data["pose"] = {"offset_mm": [0.0, 0.5, 0.0], "tilt_deg": [3.0, 0.0, 0.0]}
+    dataset = load_dataset_file(data)
+    draws = [draw(dataset, i) for i in range(4)]
+    tilts = [d.values["pose.tilt_deg.2"] for d in draws]
+    assert all(-1.6 <= t < 1.6 for t in tilts) and len(set(tilts)) == 4
+    for d in draws:
+        assert d.table["pose"]["tilt_deg"] == [3.0, 0.0, d.values["pose.tilt_deg.2"]]
+        assert d.table["pose"]["offset_mm"] == [d.values["pose.offset_mm.0"], 0.5, 0.0]
+        assert d.scan.pose.tilt_deg == (3.0, 0.0, d.values["pose.tilt_deg.2"])
+    assert dataset.base["pose"] == {"offset_mm": [0.0, 0.5, 0.0], "tilt_deg": [3.0, 0.0, 0.0]}  # the base unchanged
+
+
 def test_the_examples_load_and_every_small_sample_draws():
     big = load_dataset_file(EXAMPLES / "dataset.toml")
     assert big.count == 1000 and big.layout == "nnunet" and big.name == "angle_interlock"
+    pose = draw(big, 0).scan.pose  # the reference scans' ±0.26 mm and ±1.6° on every axis
+    assert all(0 < abs(x) < 0.26 for x in pose.offset_mm) and all(0 < abs(a) < 1.6 for a in pose.tilt_deg)
     small = load_dataset_file(EXAMPLES / "dataset_small.toml")
     assert small.count == 8 and small.name == "dataset_small"
     for i in range(small.count):

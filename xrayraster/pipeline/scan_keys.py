@@ -66,15 +66,23 @@ PATH_KEYS = (("objects", INDEX, "mesh"), ("mount", INDEX, "mesh"), ("source", "s
 
 def check_key(key: str, base: dict, where: str) -> None:
     """Refuse ``key`` (dotted) unless it names a scan-file key that can be set in ``base`` (the scan
-    table): each part a key of its table, an array entry's index within the base's array, and no
-    part below a plain value of the base."""
+    table): each part a key of its table, an array entry's index within the base's array (of
+    tables, or of values as the last part: ``pose.tilt_deg.2``), and no part below a plain value
+    of the base."""
     parts = key.split(".")
     tree, table = {**KEYS, **dict.fromkeys(_TABLES - set(KEYS), ANY)}, base
     for i, part in enumerate(parts):
         above = ".".join(parts[:i]) or "the scan file"
+        if tree is None and isinstance(table, list) and i == len(parts) - 1:
+            if not part.isdigit() or int(part) >= len(table):
+                raise ConfigError(f"{where}: '{key}': the base scan's {above} has {len(table)} entries; name one by "
+                                  f"its index, 0 to {len(table) - 1} (got {part!r})")
+            return  # an entry of an array the base gives (pose.tilt_deg.2): its loader checks the value
         if tree is None:
+            hint = (f"; to vary one entry of an array, give the array in the base scan ({above} = [...]) and "
+                    f"name the entry by its index ({above}.0)") if part.isdigit() else ""
             raise ConfigError(f"{where}: '{key}': {above} is a value, not a table; vary {above} whole "
-                              "(e.g. with choice = [...])")
+                              f"(e.g. with choice = [...]){hint}")
         if tree is ANY:
             pass  # a table this module does not describe: its loader checks the key
         elif INDEX in tree:
@@ -103,7 +111,7 @@ def set_key(table: dict, key: str, value) -> None:
     *parents, last = key.split(".")
     for part in parents:
         table = table[int(part)] if isinstance(table, list) else table.setdefault(part, {})
-    table[last] = value
+    table[int(last) if isinstance(table, list) else last] = value
 
 
 def absolute_paths(table: dict, directory: Path) -> dict:
