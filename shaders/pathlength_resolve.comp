@@ -21,12 +21,14 @@ void main() {
     if (n < 0) return;
     for (int c = 0; c < NUM_CHANNELS; c++) acc[c] = 0u;
     // Each span adds its end minus its start in fixed point, each crossing's t rounded once: the
-    // integer sums are exact, so a channel's length has the error of its crossings' t alone (as
-    // the sum passes), not that of a float32 running sum over every span.
+    // integer sums are exact (modulo 2^32: only the length must fit), so a channel's length has the
+    // error of its crossings' t alone (as the sum passes), not that of a float32 running sum.
     int owner = -1;
     uint previous = 0u;
     for (int i = 0; i < n; i++) {
-        uint units = uint(int(round(ts[i] * u_fixed_scale)));
+        float a = round(abs(ts[i]) * u_fixed_scale);  // |t| mod 2^32, exact, as crossing.glsl takes it
+        uint magnitude = uint(a - 4294967296.0 * floor(a * (1.0 / 4294967296.0)));
+        uint units = ts[i] >= 0.0 ? magnitude : 0u - magnitude;
         if (owner >= 0) acc[object_info(uint(owner)).x] += units - previous;
         previous = units;
         owner = sweep(i);
