@@ -1,6 +1,6 @@
 """A view's cost on a dataset sample's scene: the GL crossing passes and the CPU physics apart.
 
-    python -m scripts.bench_crossings                        # 32², 128², 256² (~1 min on 2 cores)
+    python -m scripts.bench_crossings                        # 32², 128², 256² (~10 s on 2 cores)
     python -m scripts.bench_crossings --quick                # 32² and 128², fewer views
     python -m scripts.bench_crossings --save out/a.npz       # keep the path lengths ...
     python -m scripts.bench_crossings --against out/a.npz    # ... and compare another checkout's
