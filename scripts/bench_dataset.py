@@ -1,7 +1,7 @@
 """Dataset builds: samples per hour at 128³ and 256³ with 1 and 2 workers and on Dask, and where a sample's time goes.
 
-    python -m scripts.bench_dataset            # 128³: 8 samples a mode; 256³: 4 a mode (~12 min on 2 cores)
-    python -m scripts.bench_dataset --quick    # 128³ only, 4 samples, one worker (~30 s)
+    python -m scripts.bench_dataset            # 128³: 8 samples a mode; 256³: 4 a mode (~8 min on 2 cores)
+    python -m scripts.bench_dataset --quick    # 128³ only, 4 samples, one worker (~40 s)
 
 The samples are the reference twin's small version (``examples/twin_small.toml``: 2 × 2 woven
 cells, 20 × 20 × 4 mm, 40 kV) with its kV, exposure and weave seed drawn per sample:
@@ -76,7 +76,7 @@ def stages(dataset, count: int) -> dict:
 
 
 def main(argv=None) -> None:
-    ap = parser(__doc__, "128³ only, 4 samples, one worker (~30 s)", plots=True)
+    ap = parser(__doc__, "128³ only, 4 samples, one worker (~40 s)", plots=True)
     args = outputs(ap.parse_args(argv), "bench_dataset")
     t_start = time.perf_counter()
     command, machine = announce()
