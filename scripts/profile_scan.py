@@ -58,7 +58,7 @@ class Profile:
         self.calls[key] = self.calls.get(key, 0) + 1
 
 
-def _timed(original, name: str, profile: Profile, wait):
+def _timing(original, name: str, profile: Profile, wait):
     """``original`` timed under ``name``, calling ``wait(first argument or None)`` before and after."""
 
     @functools.wraps(original)
@@ -91,7 +91,7 @@ def instrumented(profile: Profile):
     gl_wait = lambda engine: engine.gl.ctx.finish()  # noqa: E731 - one line each
     cl_wait = lambda stream: stream.ctx.queue.finish()  # noqa: E731
     patches = [(scan_module, "_timed", staged),
-               *((owner, attribute, _timed(getattr(owner, attribute), name, profile, wait))
+               *((owner, attribute, _timing(getattr(owner, attribute), name, profile, wait))
                  for owner, attribute, name, wait in (
                      (CrossingEngine, "_record", "GL crossing passes", gl_wait),
                      (CrossingEngine, "_resolve", "GL overlap/label pass", gl_wait),

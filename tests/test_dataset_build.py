@@ -157,11 +157,11 @@ def test_a_sample_that_fails_twice_is_recorded_and_the_exit_status_says_so(gl, c
     real = dataset.build_sample
     calls = []
 
-    def flaky(data, root, index, threads=None):
+    def flaky(data, root, index, threads=None, contexts=None):
         calls.append(index)
         if index == 1:
             raise RuntimeError("the GPU fell off the bus")
-        return real(data, root, index, threads)
+        return real(data, root, index, threads, contexts)
 
     monkeypatch.setattr(dataset, "build_sample", flaky)
     assert cli.main(["build", str(tiny(tmp_path, count=3)), "-o", str(tmp_path / "out"), "--quiet"]) == 1

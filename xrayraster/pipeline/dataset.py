@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import functools
 import io
 import json
 import logging
@@ -110,14 +111,16 @@ def build(config, directory, *, workers: int = 1, dask: bool = False, scheduler:
                        round(time.perf_counter() - start, 3))
 
 
-def build_sample(dataset: DatasetFile, root, index: int, threads: int | None = None) -> dict:
+def build_sample(dataset: DatasetFile, root, index: int, threads: int | None = None, contexts=None) -> dict:
     """Draw, scan and write sample ``index`` (one task, in whichever process runs it); returns a
-    summary for the log: index, seed, wall seconds and the share of each label by name."""
+    summary for the log: index, seed, wall seconds and the share of each label by name.
+    ``contexts``: the (GLContext, CLContext) to scan on; by default a worker process's own, made on
+    its first sample and kept (:func:`_worker_contexts`)."""
     start = time.perf_counter()
     drawn = draw(dataset, index)
     for reason in drawn.redraws:
         log.info("sample %05d redrawn: %s", index, reason)
-    gl, cl = _worker_contexts(threads)
+    gl, cl = contexts or _worker_contexts(threads)
     keep_projections = "projections" in dataset.keep
     result = scan(drawn.scan, gl=gl, cl=cl, threads=threads, keep_projections=keep_projections)
     names = {k: v for k, v in result.metadata["labels"].items() if k != "0"}
@@ -252,7 +255,7 @@ def _run(dataset, root, todo, *, workers, dask, scheduler, progress):
     elif workers > 1:
         runs = _on_pool(dataset, root, todo, workers)
     else:
-        runs = (_attempt(dataset, root, index, None) for index in todo)
+        runs = _in_process(dataset, root, todo)
     if not progress:
         yield from runs
         return
@@ -267,15 +270,26 @@ def _run(dataset, root, todo, *, workers, dask, scheduler, progress):
             yield summary
 
 
-def _attempt(dataset, root, index, threads) -> dict:
+def _attempt(dataset, root, index, threads, contexts=None) -> dict:
     """Sample ``index``, retried once; an error after that is returned, not raised."""
     for attempt in range(RETRIES + 1):
         try:
-            return build_sample(dataset, root, index, threads)
+            return build_sample(dataset, root, index, threads, contexts)
         except (XrayrasterError, OSError, RuntimeError, ValueError) as exc:
             error = f"{type(exc).__name__}: {' '.join(str(exc).split())}"
             log.info("sample %05d, attempt %d: %s", index, attempt + 1, error)
     return {"index": index, "error": error}
+
+
+def _in_process(dataset, root, todo):
+    """The samples one after another in this process, on contexts made for the build and released
+    when it ends (a caller's process keeps no GL or OpenCL state of ours)."""
+    from ..gl.context import GLContext
+    from ..recon.opencl import CLContext
+
+    with GLContext() as gl, CLContext() as cl:
+        for index in todo:
+            yield _attempt(dataset, root, index, None, (gl, cl))
 
 
 def _on_pool(dataset, root, todo, workers):
@@ -285,14 +299,7 @@ def _on_pool(dataset, root, todo, workers):
     context = multiprocessing.get_context("spawn")  # GL and OpenCL state does not survive a fork
     pool = context.Pool(workers, initializer=_init_worker)
     try:
-        pending = [pool.apply_async(_attempt, (dataset, root, index, threads)) for index in todo]
-        while pending:
-            done = [p for p in pending if p.ready()]
-            for p in done:
-                pending.remove(p)
-                yield p.get()
-            if not done:
-                time.sleep(0.05)
+        yield from pool.imap_unordered(functools.partial(_attempt, dataset, root, threads=threads), todo)
     except BaseException:  # Ctrl-C, an error, or the caller stopped: the workers stop now
         pool.terminate()  # (their temporaries are then stale, for the build's sweep)
         raise
@@ -323,8 +330,9 @@ def _on_dask(dataset, root, todo, workers, scheduler):
             cluster.close()
 
 
-# One process's contexts, made on its first sample and kept for the rest (a worker of a pool or
-# of Dask scans many samples; making them costs a second, compiling the kernels more).
+# A worker process's contexts, made on its first sample and kept for the rest (a worker of a pool
+# or of Dask scans many samples; making them costs a second, compiling the kernels more). Only
+# worker processes make them: a build in the caller's process owns its own (_in_process).
 _contexts = None
 
 
