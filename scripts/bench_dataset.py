@@ -2,6 +2,7 @@
 
     python -m scripts.bench_dataset            # 128³: 8 samples a mode; 256³: 4 a mode (~8 min on 2 cores)
     python -m scripts.bench_dataset --quick    # 128³ only, 4 samples, one worker (~40 s)
+    python -m scripts.bench_dataset --workers 1 8 --samples 32 16   # a bigger machine: pools of 1 and 8
 
 The samples are the reference twin's small version (``examples/twin_small.toml``: 2 × 2 woven
 cells, 20 × 20 × 4 mm, 40 kV) with its kV, exposure and weave seed drawn per sample:
@@ -11,7 +12,9 @@ cells, 20 × 20 × 4 mm, 40 kV) with its kV, exposure and weave seed drawn per s
 
 Each size is built from scratch as ``xrayraster build`` builds it (``xr.build``), in each mode:
 one worker (this process), a pool of two workers (``workers=2``, one thread each), and a Dask
-``LocalCluster`` of two worker processes (``dask=True``). Samples per hour are the samples over the
+``LocalCluster`` of two worker processes (``dask=True``). ``--workers`` sets the pool sizes (the
+Dask cluster takes the largest) and ``--samples`` the samples a mode builds at 128³ and 256³, for a
+machine with more cores than this one's two. Samples per hour are the samples over the
 build's wall time, start-up of the pool or cluster included. The stages of a sample (sample
 meshing, projections, FDK, labels: ``scan.json``'s ``seconds``) are those of ``xr.scan`` run on the
 first draws in this process after one warm-up sample.
@@ -40,7 +43,12 @@ SIZES = {  # name: (views, detector pixels across, pixel size mm, voxels across,
     "128": (180, 128, 0.539467, 128, 0.2312, 8),
     "256": (360, 256, 0.2697335, 256, 0.1156, 4),
 }
-MODES = {"1 worker": {"workers": 1}, "2 workers": {"workers": 2}, "Dask, 2 workers": {"workers": 2, "dask": True}}
+
+
+def modes(workers: list[int]) -> dict[str, dict]:
+    """Build options by mode name: a pool of each size in ``workers`` (1: this process), then Dask with the largest."""
+    out = {f"{n} worker{'s' * (n > 1)}": {"workers": n} for n in workers}
+    return {**out, f"Dask, {max(workers)} workers": {"workers": max(workers), "dask": True}}
 
 
 def dataset_table(size: str, count: int) -> dict:
@@ -77,18 +85,22 @@ def stages(dataset, count: int) -> dict:
 
 def main(argv=None) -> None:
     ap = parser(__doc__, "128³ only, 4 samples, one worker (~40 s)", plots=True)
+    ap.add_argument("--workers", type=int, nargs="+", default=[1, 2], metavar="N",
+                    help="pool sizes to measure (default 1 2); Dask runs with the largest")
+    ap.add_argument("--samples", type=int, nargs=2, metavar=("N128", "N256"),
+                    help=f"samples a mode builds at 128³ and 256³ (default {SIZES['128'][-1]} {SIZES['256'][-1]})")
     args = outputs(ap.parse_args(argv), "bench_dataset")
     t_start = time.perf_counter()
     command, machine = announce()
     sizes = ["128"] if args.quick else list(SIZES)
-    modes = {"1 worker": MODES["1 worker"]} if args.quick else MODES
+    runs = {"1 worker": {"workers": 1}} if args.quick else modes(args.workers)
     rows, split = [], {}
     say(f"{'size':>5} {'mode':>16} {'samples':>8} {'wall s':>8} {'samples/h':>10} {'max |dmu| 1/cm':>16} {'same bytes':>11}")
     for size in sizes:
-        count = 4 if args.quick else SIZES[size][-1]
+        count = 4 if args.quick else args.samples[sizes.index(size)] if args.samples else SIZES[size][-1]
         dataset = load_dataset_file(dataset_table(size, count), base_dir=ROOT)
         reference = None
-        for mode, options in modes.items():
+        for mode, options in runs.items():
             out = OUT / "bench_dataset" / f"{size}_{mode.replace(' ', '_').replace(',', '')}"
             shutil.rmtree(out, ignore_errors=True)
             start = time.perf_counter()

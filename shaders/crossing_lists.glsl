@@ -5,7 +5,7 @@
 layout(local_size_x = 8, local_size_y = 8) in;
 layout(std430, binding = BINDING_HEADS) readonly buffer Heads { uint heads[]; };
 layout(std430, binding = BINDING_NODES) readonly buffer Nodes { uvec4 nodes[]; };  // t bits, object*2 + exit, next, -
-layout(std430, binding = BINDING_COUNTERS) buffer Counters { uint node_count; uint overflow_pixels; uint max_depth; };
+layout(std430, binding = BINDING_COUNTERS) buffer Counters { uint overflow_pixels; uint max_depth; };
 
 const uint END = 0xFFFFFFFFu;
 float ts[MAX_CROSSINGS];

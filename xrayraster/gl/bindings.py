@@ -19,11 +19,12 @@ from __future__ import annotations
 
 BINDINGS = {
     "output": 1,  # what a resolve pass writes: path lengths, or packed labels
+    "stripes": 2,  # nodes taken in each stripe of the node pool
     "large": 3,  # indirect draw command + the triangles the rasteriser draws
     "accumulators": 4,  # fixed-point sums (channel, row, col); sum passes only
     "heads": 4,  # per-pixel list heads; overlap passes only
     "nodes": 5,  # crossing-list nodes
-    "counters": 6,  # node count, overflowing pixels, deepest list
+    "counters": 6,  # a resolve pass's overflowing pixels and deepest list
     "large_corners": 7,  # window-space corners of the large triangles
 }
 

@@ -44,6 +44,7 @@ log = logging.getLogger("xrayraster")
 _END = 0xFFFFFFFF
 NODE_BYTES = 16
 MIN_CROSSINGS = 16  # list room per pixel a resolve pass starts with; widened on overflow
+NODE_STRIPE_BITS = 8  # the node pool's 256 stripes, each with its own counter (shaders/crossing.glsl)
 SMALL_TRIANGLE_PIXELS = 64  # measured: 32-128 equally fast on llvmpipe at 256²-2048²
 
 
@@ -90,7 +91,7 @@ class CrossingEngine:
         self._max_groups = int(gl.ctx.info["GL_MAX_COMPUTE_WORK_GROUP_COUNT"][0])
         self._scene: UploadedScene | None = None
         self._buffers: dict[str, moderngl.Buffer] = {}
-        self._capacity = 0  # crossing nodes the node pool holds
+        self._stripe_capacity = 0  # crossing nodes each stripe of the node pool holds
         self.max_crossings = MIN_CROSSINGS  # list room per pixel of the resolve passes
 
     @property
@@ -253,25 +254,26 @@ class CrossingEngine:
         heads = self._buffers.get("heads")
         if heads is None:
             heads = self._buffers["heads"] = self.gl.ctx.buffer(np.full(rows * cols, _END, np.uint32).tobytes())
-            self._grow_node_pool(4 * rows * cols)
-        counters = self.scratch("counters", 16)
+            self._grow_node_pool(4 * rows * cols >> NODE_STRIPE_BITS)
+        stripes = self.scratch("stripes", 4 << NODE_STRIPE_BITS)
         while True:
             heads.bind_to_storage_buffer(BINDINGS["heads"])
             self._buffers["nodes"].bind_to_storage_buffer(BINDINGS["nodes"])
-            counters.write(np.zeros(4, np.uint32).tobytes())
-            counters.bind_to_storage_buffer(BINDINGS["counters"])
-            self._record(uploaded, view, table, {"RESOLVE": 1}, {"u_capacity": self._capacity})
-            used = int(np.frombuffer(counters.read(size=4), np.uint32)[0])
-            if used <= self._capacity:
+            stripes.write(bytes(4 << NODE_STRIPE_BITS))
+            stripes.bind_to_storage_buffer(BINDINGS["stripes"])
+            self._record(uploaded, view, table, {"RESOLVE": 1, "NODE_STRIPE_BITS": NODE_STRIPE_BITS},
+                         {"u_stripe_capacity": self._stripe_capacity})
+            used = np.frombuffer(stripes.read(), np.uint32)
+            if used.max() <= self._stripe_capacity:
                 return CrossingLists(self, uploaded)
-            self._grow_node_pool(used)
+            self._grow_node_pool(int(used.max()), int(used.sum()))
 
     def _resolve(self, uploaded: UploadedScene, shader: str, defines: dict, uniforms: dict, outputs: dict) -> None:
         """The one overflow loop: run compute pass ``shader`` over the pixels with room for
         MAX_CROSSINGS crossings a pixel; where a list holds more, the pass counts an overflow and
         skips the pixel, and it runs again with room for the deepest list (kept for later views)."""
         rows, cols = self.shape
-        counters = self._buffers["counters"]
+        counters = self.scratch("counters", 8)
         while True:
             prog = self.gl.compute(shader, {**defines, "MAX_CROSSINGS": self.max_crossings})
             set_uniforms(prog, uniforms)
@@ -281,10 +283,10 @@ class CrossingEngine:
             counters.bind_to_storage_buffer(BINDINGS["counters"])
             for name, buffer in outputs.items():
                 buffer.bind_to_storage_buffer(BINDINGS[name])
-            counters.write(np.zeros(4, np.uint32).tobytes())
+            counters.write(bytes(8))
             prog.run((cols + 7) // 8, (rows + 7) // 8, 1)
             self.gl.ctx.memory_barrier()
-            _, overflow, depth, _ = np.frombuffer(counters.read(), np.uint32)
+            overflow, depth = np.frombuffer(counters.read(size=8), np.uint32)
             if not overflow:
                 return
             self.max_crossings = int(2 ** np.ceil(np.log2(depth)))
@@ -294,19 +296,21 @@ class CrossingEngine:
         rows, cols = self.shape
         self._buffers["heads"].write(np.full(rows * cols, _END, np.uint32).tobytes())
 
-    def _grow_node_pool(self, needed: int) -> None:
+    def _grow_node_pool(self, per_stripe: int, crossings: int = 0) -> None:
+        """Room for ``per_stripe`` nodes in every stripe, with a quarter to spare (``crossings``: the
+        view's total, for the message when that cannot fit in memory)."""
         rows, cols = self.shape
-        capacity = int(needed * 1.25) + 1024
-        size = capacity * NODE_BYTES
+        capacity = int(per_stripe * 1.25) + 64
+        size = (capacity << NODE_STRIPE_BITS) * NODE_BYTES
         free = available_memory()
         if free is not None and size > free // 2:
             raise RenderError(
-                f"the scene has {needed} ray-surface crossings in one view ({needed / (rows * cols):.0f} per pixel); "
+                f"the scene has {crossings} ray-surface crossings in one view ({crossings / (rows * cols):.0f} per pixel); "
                 f"storing them needs {size / 2**30:.1f} GiB. Reduce the detector size or supersampling, "
                 "or render without overlap resolution (overlap='sum') if the objects do not really overlap"
             )
         self.scratch("nodes", size)
-        self._capacity = capacity
+        self._stripe_capacity = capacity
         self._empty_lists()  # a list cut short by the overflow is in the heads buffer
 
     # -- GL objects kept between views -----------------------------------------------------------
