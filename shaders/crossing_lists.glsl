@@ -46,7 +46,9 @@ int load_sorted(int pixel) {
 
 // Crossing i enters (+1) or leaves (-1) its object; returns the rank of the object that owns
 // the space after it: the highest-ranked (priority, then insertion order) object the ray is
-// inside, or -1 for none.
+// inside, or -1 for none. The active list holds only the objects the ray is inside (an object
+// whose count returns to 0 leaves it), so it stays as short as the nesting is deep however many
+// objects the ray crosses: keeping every object once met made each crossing cost O(objects met).
 int sweep(int i) {
     uint rank = metas[i] >> 1;  // object index = rank order
     int step = (metas[i] & 1u) == 1u ? -1 : 1;  // exit leaves, entry enters
@@ -54,8 +56,13 @@ int sweep(int i) {
     while (j < n_active && active_rank[j] != rank) j++;
     if (j == n_active) { active_rank[j] = rank; active_count[j] = 0; n_active++; }
     active_count[j] += step;
+    if (active_count[j] == 0) {
+        n_active--;
+        active_rank[j] = active_rank[n_active];
+        active_count[j] = active_count[n_active];
+    }
     int owner = -1;
     for (int q = 0; q < n_active; q++)
-        if (active_count[q] > 0 && (owner < 0 || int(active_rank[q]) > owner)) owner = int(active_rank[q]);
+        if (active_count[q] > 0 && int(active_rank[q]) > owner) owner = int(active_rank[q]);
     return owner;
 }
