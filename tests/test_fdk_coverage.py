@@ -16,6 +16,7 @@ import xrayraster as xr
 from references.fdk import fdk_reference
 from references.phantoms import Ellipsoid, project, rtk_shepp_logan, sphere, voxel_values
 from xrayraster.core.geometry import GeometryError
+from xrayraster.recon import fdk_stream as reconstruction
 from xrayraster.recon.fdk import FDKStream, ReconstructionError, fdk
 
 # RTK's rtkdisplaceddetectortest: offsets of the detector centre (mm); RTK gives the last two as
@@ -116,10 +117,12 @@ WIDE = Ellipsoid((1.0, -0.5, 0.0), (18.0, 15.0, 60.0), 0.3, MU)  # wider than th
 
 @pytest.mark.parametrize("case", ["full", "displaced", "short"])
 @pytest.mark.parametrize("truncation", ["auto", True])
-def test_truncation_correction_equals_the_reference(cl, case, truncation):
+@pytest.mark.parametrize("host_filter", [True, False])
+def test_truncation_correction_equals_the_reference(cl, monkeypatch, case, truncation, host_filter):
     """An ellipse 1.4× wider than the field of view: rows extrapolated past the detector's edges
-    (the package's kernel against references/fdk.py's own detection and extrapolation), the
-    displaced detector's short side left alone, Parker's weights too."""
+    (the package's filter, on the host and in the kernel, against references/fdk.py's own
+    detection and extrapolation), the displaced detector's short side left alone, Parker's weights too."""
+    monkeypatch.setattr(reconstruction, "HOST_FILTER", host_filter)
     g = CASES[case]
     p = project([WIDE], g)
     want = fdk_reference(p, g, SMALL_VOLUME, truncation=truncation, truncation_width=0.3)

@@ -130,7 +130,8 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False, a
             (nullcontext(cl) if cl is not None else CLContext()) as cl:
         with _timed(seconds, "fdk"):
             stream = FDKStream(loaded.geometry, loaded.volume, filter=options.filter, truncation=options.truncation,
-                               truncation_width=options.truncation_width, context=cl, batch_views=BATCH_VIEWS)
+                               truncation_width=options.truncation_width, context=cl, batch_views=BATCH_VIEWS,
+                               threads=threads)
         with stream:
             provenances, stacks = _project_into(stream, renderer, scene, loaded, seconds, progress, keep_projections,
                                                 allow_starved)

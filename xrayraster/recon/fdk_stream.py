@@ -28,6 +28,7 @@ from ..core.geometry import as_vector_geometry
 from ..core.memory import available_memory
 from ..core.volume import VolumeGeometry
 from .fdk_weights import FDKViews, fdk_views
+from .host_filter import filter_rows_host
 from .opencl import CLContext
 from .ramp_filter import padded_length, ramp_response
 from .truncation import DEFAULT_WIDTH, LEFT, RIGHT, check_truncation, padding_columns, truncated_row_ends
@@ -43,6 +44,7 @@ MAX_BATCH_VIEWS = 256  # views per backprojection launch: 48 bytes each of const
 # Kernel choices, normally automatic; the tests set them to check every path on one device.
 LAYOUT = "auto"  # filtered views by "rows" (GPUs), by "columns" (CPUs), or "auto" by device type
 VECTORISED = True  # backproject_windowed where it applies (x86 CPUs with AVX2, upright detectors)
+HOST_FILTER = "auto"  # rows filtered on the host (host_filter.py): "auto" on CPU devices, True, False
 DEVICE_SHARE = 0.8  # of the device's global memory we plan to use
 WINDOW_PAD = 32 * 4  # bytes after each batch of filtered views: backproject_windowed reads past the last column
 
@@ -98,6 +100,9 @@ class FDKStream:
     Options as :func:`fdk`. Views may come in any order and batch size (backprojection is a sum);
     :meth:`result` refuses to run until each view came exactly once.
 
+    On a CPU device the rows are filtered on the host (:mod:`~xrayraster.recon.host_filter`:
+    SciPy's FFT, ``threads`` of them, None for every core), on other devices by the kernel.
+
     Memory plan (checked before any work, a request that cannot fit is refused with the sizes):
     when the whole volume fits the device next to one batch, it stays there and each batch is
     backprojected on arrival; on CPU devices it lives in the very array returned (no copy).
@@ -108,7 +113,7 @@ class FDKStream:
     def __init__(self, geometry, volume: VolumeGeometry, *, filter: str = "ram-lak", cutoff: float = 1.0,
                  scan: str = "auto", displaced="auto", truncation="auto", truncation_width: float = DEFAULT_WIDTH,
                  context: CLContext | None = None, device: str | None = None, memory_limit: int | None = None,
-                 batch_views: int = MAX_BATCH_VIEWS):
+                 batch_views: int = MAX_BATCH_VIEWS, threads: int | None = None):
         if not isinstance(volume, VolumeGeometry):
             raise ReconstructionError(
                 f"volume must be a VolumeGeometry (the grid to reconstruct), got {type(volume).__name__}")
@@ -138,6 +143,8 @@ class FDKStream:
                  "backprojected as they arrive" if self.plan.streamed
                  else f"filtered views kept {'on the device' if self.plan.resident else 'in host memory'}")
         self._layout = {"COLUMN_MAJOR": 1} if _column_major(info, LAYOUT) else {}
+        self._host_filter = HOST_FILTER is True or (HOST_FILTER == "auto" and "CPU" in info.kind)
+        self._threads = threads
         self._filter_setup()
         self._backproject_setup()
         self._added = np.zeros(len(self.views.scale), bool)
@@ -256,6 +263,7 @@ class FDKStream:
         n = len(response)
         bits = int(math.log2(n))
         reverse = np.array([int(f"{k:0{bits}b}"[::-1], 2) for k in range(n)])
+        self._response_host = response
         self._response = self.ctx.buffer((response[reverse] / n).astype(np.float32), "r")
         self._twiddle = self.ctx.buffer(np.exp(-2j * np.pi * np.arange(n // 2) / n).astype(np.complex64), "r")
         self._n_fft = n
@@ -275,18 +283,26 @@ class FDKStream:
             n = self._n_fft
         self._row_ends[0] += int(np.count_nonzero(ends & LEFT)) + int(np.count_nonzero(ends & RIGHT))
         self._row_ends[1] += 2 * ends.size
-        raw_dev = ctx.buffer(raw, "r")
-        ends_dev = ctx.buffer(ends, "r")
         # The pad lets backproject_windowed read its row window past the last column.
         out_dev = ctx.buffer(count * self._view_bytes + WINDOW_PAD)
         cl.enqueue_fill_buffer(ctx.queue, out_dev, np.float32(0), 0, count * self._view_bytes + WINDOW_PAD)
+        pad = self._pad if self._extended else 0
+        if self._host_filter:
+            views = self.views
+            host = filter_rows_host(raw, views.vectors[batch.start : batch.stop], views.depth[batch.start : batch.stop],
+                                    views.redundancy[batch.start : batch.stop], ends, self._response_host, views.lead,
+                                    views.filtered_cols, pad, views.beam == "cone", bool(self._layout), self._threads)
+            cl.enqueue_copy(ctx.queue, out_dev, host)
+            return out_dev
+        raw_dev = ctx.buffer(raw, "r")
+        ends_dev = ctx.buffer(ends, "r")
         red_dev = ctx.buffer(self.views.redundancy[batch.start : batch.stop].astype(np.float32), "r")
         geo_dev = ctx.buffer(self._geo[batch.start : batch.stop], "r")
         scratch = ctx.buffer(count * pairs * n * 8) if self.plan.global_scratch else self._local_scratch
         self._filter_kernel(ctx.queue, (count * pairs * self._local_size,), (self._local_size,), raw_dev, out_dev,
                             red_dev, geo_dev, ends_dev, self._response, self._twiddle, scratch, np.int32(rows),
                             np.int32(cols), np.int32(self.views.lead), np.int32(self.views.filtered_cols),
-                            np.int32(self._pad if self._extended else 0), np.int32(n),
+                            np.int32(pad), np.int32(n),
                             np.int32(self.views.beam == "cone"))
         for buffer in (raw_dev, red_dev, geo_dev, ends_dev) + ((scratch,) if self.plan.global_scratch else ()):
             buffer.release()  # after the kernel: OpenCL keeps them alive until it has run

@@ -1,0 +1,85 @@
+"""FDK stage 1 on the host, for CPU devices: pre-weight, extend and ramp-filter detector rows with
+SciPy's FFT (pocketfft, threaded), writing exactly what ``shaders/fdk_filter.cl`` writes.
+
+Why a second path: on a CPU OpenCL device (PoCL) the kernel's radix-2 FFT in local memory runs each
+barrier-separated stage as its own loop over the work-items, about 38 µs a row pair of 256 points on
+one core, where pocketfft takes about 2 µs a row (BENCHMARKS.md). GPUs keep the kernel: there the
+rows are filtered where they are backprojected. Both follow the same formulas (fdk_filter.cl and
+:mod:`~xrayraster.recon.truncation`): tests run both on one device and compare them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.fft
+
+from .truncation import LEFT, RIGHT
+
+CHUNK_BYTES = 64 << 20  # padded rows filtered per FFT call, at most: bounds the scratch memory
+
+
+def filter_rows_host(lineint: np.ndarray, vectors: np.ndarray, depth: np.ndarray, redundancy: np.ndarray,
+                     ends: np.ndarray, response: np.ndarray, lead: int, out_cols: int, pad: int, cone: bool,
+                     column_major: bool, workers: int | None = None) -> np.ndarray:
+    """Filtered views of one batch, float32: ``(views, out_cols + 2, rows + 2)`` with ``column_major``,
+    else ``(views, rows + 2, out_cols + 2)``, with a one-pixel ring of zeros as the backprojection reads them.
+
+    ``lineint`` (views, rows, cols) line integrals; ``vectors`` (views, 12) and ``depth`` (views,):
+    source, detector centre and pixel steps (mm) and the source-to-detector-plane distance of each
+    view (:class:`~xrayraster.recon.fdk_weights.FDKViews`); ``redundancy`` (views, cols);
+    ``ends`` (views, rows) the row ends to extrapolate (:func:`~xrayraster.recon.truncation.truncated_row_ends`)
+    over ``pad`` columns; ``response`` the ramp's real, even frequency response (its length n is the
+    padded row's); pixel column c sits at index ``(c + lead) mod n`` of the padded row, and the output
+    keeps indices ``0 … out_cols − 1``. ``workers``: FFT threads (None: every core)."""
+    views, rows, cols = lineint.shape
+    n = len(response)
+    workers = -1 if workers is None else workers  # SciPy's None is one thread
+    half = response[: n // 2 + 1].astype(np.float32)
+    ring = (views, out_cols + 2, rows + 2) if column_major else (views, rows + 2, out_cols + 2)
+    out = np.zeros(ring, np.float32)
+    step = max(1, CHUNK_BYTES // (rows * n * 16))
+    for first in range(0, views, step):
+        part = slice(first, min(first + step, views))
+        q = lineint[part] * _pre_weights(vectors[part], depth[part], redundancy[part], rows, cols, cone)
+        padded = np.zeros((len(q), rows, n), np.float32)
+        padded[..., lead : lead + cols] = q
+        if pad:
+            _extend(padded, q, ends[part], lead, pad)
+        spectrum = scipy.fft.rfft(padded, axis=-1, workers=workers)
+        spectrum *= half
+        filtered = scipy.fft.irfft(spectrum, n=n, axis=-1, workers=workers)[..., :out_cols]
+        if column_major:
+            out[part, 1:-1, 1:-1] = filtered.transpose(0, 2, 1)
+        else:
+            out[part, 1:-1, 1:-1] = filtered
+    return out
+
+
+def _pre_weights(vectors, depth, redundancy, rows: int, cols: int, cone: bool) -> np.ndarray:
+    """(views, rows, cols) float32: redundancy × cosine weight D / |p − s| (1 for parallel beams), p the
+    pixel centre; |p − s|² expanded in the pixel offsets so that no (views, rows, cols, 3) array is made."""
+    weights = np.broadcast_to(redundancy[:, None, :], (len(redundancy), rows, cols))
+    if not cone:
+        return weights.astype(np.float32)
+    s, d, u, v = (vectors[:, 3 * k : 3 * k + 3] for k in range(4))
+    a = d - s
+    c = (np.arange(cols) - 0.5 * (cols - 1))[None, None, :]
+    r = (np.arange(rows) - 0.5 * (rows - 1))[None, :, None]
+    dot = lambda x, y: np.einsum("ij,ij->i", x, y)[:, None, None]  # noqa: E731 - per view
+    squared = (dot(a, a) + c * c * dot(u, u) + r * r * dot(v, v) + 2 * c * dot(a, u) + 2 * r * dot(a, v)
+               + 2 * c * r * dot(u, v))
+    return (weights * (depth[:, None, None] / np.sqrt(squared))).astype(np.float32)
+
+
+def _extend(padded: np.ndarray, q: np.ndarray, ends: np.ndarray, lead: int, pad: int) -> None:
+    """Past each flagged row end, the row's point mirror about the edge pixel rolled off to 0 over
+    ``pad`` columns (:mod:`~xrayraster.recon.truncation`), written into ``padded`` in place."""
+    n, cols = padded.shape[-1], q.shape[-1]
+    j = np.arange(1, pad + 1)
+    roll = (np.cos(0.5 * np.pi * j / (pad + 1)) ** 2).astype(np.float32)
+    for flag, edge, mirror, at in ((LEFT, 0, np.minimum(j, cols - 1), lead - j),
+                                   (RIGHT, cols - 1, np.maximum(cols - 1 - j, 0), lead + cols - 1 + j)):
+        flagged = (ends & flag) != 0
+        if flagged.any():
+            extension = roll * np.maximum(0.0, 2.0 * q[..., edge : edge + 1] - q[..., mirror])
+            padded[..., at % n] = np.where(flagged[..., None], extension, 0.0)
