@@ -284,16 +284,19 @@ class FDKStream:
         self._row_ends[0] += int(np.count_nonzero(ends & LEFT)) + int(np.count_nonzero(ends & RIGHT))
         self._row_ends[1] += 2 * ends.size
         # The pad lets backproject_windowed read its row window past the last column.
-        out_dev = ctx.buffer(count * self._view_bytes + WINDOW_PAD)
-        cl.enqueue_fill_buffer(ctx.queue, out_dev, np.float32(0), 0, count * self._view_bytes + WINDOW_PAD)
+        size = count * self._view_bytes
+        out_dev = ctx.buffer(size + WINDOW_PAD)
         pad = self._pad if self._extended else 0
         if self._host_filter:
             views = self.views
             host = filter_rows_host(raw, views.vectors[batch.start : batch.stop], views.depth[batch.start : batch.stop],
                                     views.redundancy[batch.start : batch.stop], ends, self._response_host, views.lead,
-                                    views.filtered_cols, pad, views.beam == "cone", bool(self._layout), self._threads)
-            cl.enqueue_copy(ctx.queue, out_dev, host)
+                                    views.filtered_cols, pad, views.beam == "cone", "COLUMN_MAJOR" in self._layout,
+                                    self._threads)
+            cl.enqueue_copy(ctx.queue, out_dev, host)  # the views with their rings of zeros
+            cl.enqueue_fill_buffer(ctx.queue, out_dev, np.float32(0), size, WINDOW_PAD)
             return out_dev
+        cl.enqueue_fill_buffer(ctx.queue, out_dev, np.float32(0), 0, size + WINDOW_PAD)
         raw_dev = ctx.buffer(raw, "r")
         ends_dev = ctx.buffer(ends, "r")
         red_dev = ctx.buffer(self.views.redundancy[batch.start : batch.stop].astype(np.float32), "r")
