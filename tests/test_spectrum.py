@@ -69,6 +69,24 @@ def test_from_tube_scales_linearly_with_mas():
     np.testing.assert_array_equal(ten.energies, quarter.energies)
 
 
+def test_a_tube_seen_again_reuses_its_model_and_gives_a_new_speks_spectrum_bit_for_bit():
+    """The same tube at another mAs (as a dataset drawing the exposure makes it): the SpekPy model
+    is reused, and the spectrum equals a new Spek's made with that mAs, bit for bit."""
+    from xrayraster.physics.spectrum import _tube_model
+
+    p = dict(TUBES["120kVp_W_1mmCu_mas2"])
+    Spectrum.from_tube(**p)
+    hits = _tube_model.cache_info().hits
+    for mas in (0.37, 2.0, 11.5):
+        p["mas"] = mas
+        ours = Spectrum.from_tube(**p)
+        k, per_kev_per_cm2 = _spekpy_reference(p).get_spectrum()
+        np.testing.assert_array_equal(ours.fluence, np.asarray(per_kev_per_cm2) * p["bin_kev"] / 100.0)
+        np.testing.assert_array_equal(ours.energies, k)
+        assert f"{mas:g} mAs" in ours.description
+    assert _tube_model.cache_info().hits == hits + 3
+
+
 def test_photons_per_pixel_inverse_square_area_obliquity():
     spec = Spectrum.from_arrays([20.0, 30.0, 40.0], [1.0e3, 3.7e3, 0.9e3])
     at_1m = spec.photons_per_pixel(1000.0, 1.0)

@@ -23,8 +23,11 @@ multiplied by the ``mas`` the Spek was made with (``spk = ... * mas * dscale * .
 
 from __future__ import annotations
 
+import functools
 import math
 import re
+import sys
+import threading
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -230,33 +233,13 @@ class Spectrum:
                 raise SpectrumError(f"filters[{material!r}] = {thickness!r} mm: filter thickness must be ≥ 0 mm")
             filter_list.append((material, t))
 
-        try:
-            import spekpy
-        except ImportError:  # pragma: no cover - spekpy is a declared dependency
-            raise SpectrumError("from_tube needs SpekPy: pip install 'spekpy>=2.0'") from None
-
-        z_cm = REFERENCE_DISTANCE_MM / 10.0
-        try:
-            spek = spekpy.Spek(kvp=kvp, th=angle, targ=anode, dk=dk, mas=mas, x=0.0, y=0.0, z=z_cm)
-        except Exception as exc:  # noqa: BLE001 - SpekPy raises bare Exception naming the limit
-            message = str(exc)
-            name = "kvp" if "kvp" in message.lower() else "anode" if "anode" in message.lower() else "tube parameters"
-            raise SpectrumError(f"{name}: SpekPy refused kvp={kvp:g}, anode={anode!r}, bin_kev={dk:g}: {message}") from None
-        for material, t in filter_list:
-            try:
-                spek.filter(material, t)
-            except Exception:  # noqa: BLE001 - SpekPy: bare Exception for an unknown material
-                raise SpectrumError(
-                    f"filters: {material!r} is not a SpekPy material; use a SpekPy name such as 'Al', 'Cu', 'Be', 'Air' "
-                    "(spekpy.Spek.show_matls() lists them; names are case-sensitive)"
-                ) from None
-        energies, per_kev_per_cm2 = spek.get_spectrum(edges=False, flu=True, diff=True)
+        spek = _tube_model(kvp, angle, anode, dk, tuple(filter_list))
+        with _TUBE_LOCK:  # the cached model is shared: set its mAs and read it in one step
+            spek.set(mas=mas)
+            energies, per_kev_per_cm2 = spek.get_spectrum(edges=False, flu=True, diff=True)
         photons = np.asarray(per_kev_per_cm2, dtype=np.float64) * dk / _MM2_PER_CM2
 
-        try:
-            version = spekpy.__version__
-        except AttributeError:  # pragma: no cover
-            version = "?"
+        version = getattr(sys.modules["spekpy"], "__version__", "?")
         filt = ", ".join(f"{m} {t:g} mm" for m, t in filter_list) or "none"
         physics = getattr(getattr(spek.state, "model_parameters", None), "physics", "default")
         description = (
@@ -379,3 +362,35 @@ class Spectrum:
         )
         description = f"{self.description}; {note}" if self.description else note
         return Spectrum(e, n, description=description)
+
+
+# SpekPy builds its tube model (the electron penetration and bremsstrahlung tables for one kVp,
+# anode, angle and bin width; 0.3-0.5 s) in Spek(), and scales it by mAs only when the spectrum is
+# read, so a model is kept per tube and filtration and only its mAs is set anew: a dataset that
+# draws the exposure but keeps the tube, or a preview changing the mAs, pays for the model once.
+# The spectrum is the same, bit for bit, as a new Spek's (tests/test_spectrum.py).
+_TUBE_LOCK = threading.Lock()
+
+
+@functools.lru_cache(maxsize=8)
+def _tube_model(kvp: float, angle: float, anode: str, dk: float, filters: tuple[tuple[str, float], ...]):
+    """A SpekPy ``Spek`` of this tube (mAs 1 until set), with ``filters`` ((material, mm), ...) applied."""
+    try:
+        import spekpy
+    except ImportError:  # pragma: no cover - spekpy is a declared dependency
+        raise SpectrumError("from_tube needs SpekPy: pip install 'spekpy>=2.0'") from None
+    try:
+        spek = spekpy.Spek(kvp=kvp, th=angle, targ=anode, dk=dk, mas=1.0, x=0.0, y=0.0, z=REFERENCE_DISTANCE_MM / 10.0)
+    except Exception as exc:  # noqa: BLE001 - SpekPy raises bare Exception naming the limit
+        message = str(exc)
+        name = "kvp" if "kvp" in message.lower() else "anode" if "anode" in message.lower() else "tube parameters"
+        raise SpectrumError(f"{name}: SpekPy refused kvp={kvp:g}, anode={anode!r}, bin_kev={dk:g}: {message}") from None
+    for material, t in filters:
+        try:
+            spek.filter(material, t)
+        except Exception:  # noqa: BLE001 - SpekPy: bare Exception for an unknown material
+            raise SpectrumError(
+                f"filters: {material!r} is not a SpekPy material; use a SpekPy name such as 'Al', 'Cu', 'Be', 'Air' "
+                "(spekpy.Spek.show_matls() lists them; names are case-sensitive)"
+            ) from None
+    return spek
