@@ -1,9 +1,8 @@
 // Where a ray-surface crossing goes. Two variants, chosen by the RESOLVE define:
 //  * sum (default): the signed distance goes into the pixel's 32-bit fixed-point accumulator of
-//    the object's channel, and, for an object nested in another (Scene.nesting), is taken off
-//    its container's channel. Integer addition is exact and order-independent, so the total is
-//    deterministic; it wraps modulo 2^32, so only the final length (< 2^31 ulps, set by
-//    u_fixed_scale from the scene size) must fit, never the single terms.
+//    the object's channel (fixed_point.glsl: exact, order-independent sums, so the total is
+//    deterministic), and, for an object nested in another (Scene.nesting), is taken off its
+//    container's channel.
 //  * RESOLVE: the crossing is appended to the pixel's linked list for pathlength_resolve.comp.
 
 #ifdef RESOLVE
@@ -29,14 +28,12 @@ void record_crossing(ivec2 px, uint object, int side, float t) {
     }
 }
 #else
+#include "fixed_point.glsl"
 layout(std430, binding = BINDING_ACCUMULATORS) buffer Accumulators { uint acc[]; };            // (channel, row, col)
-uniform float u_fixed_scale;  // fixed-point units per mm, a power of two
 
 void record_crossing(ivec2 px, uint object, int side, float t) {
-    float a = round(abs(t) * u_fixed_scale);
-    // a mod 2^32, exact in float32: above 2^32 the spacing of floats is already >= 2^9.
-    uint units = uint(a - 4294967296.0 * floor(a * (1.0 / 4294967296.0)));
-    uint value = (side > 0) == (t >= 0.0) ? units : 0u - units;  // exits add t, entries subtract it
+    uint units = fixed_units(t);
+    uint value = side > 0 ? units : 0u - units;  // exits add t, entries subtract it
     uint pixel = uint(px.y) * uint(u_size.x) + uint(px.x);
     uint npix = uint(u_size.x) * uint(u_size.y);
     uvec4 info = object_info(object);  // channel, active, container channel + 1 (0: none)

@@ -5,11 +5,11 @@
 
 #include "crossing_lists.glsl"
 #include "objects.glsl"
+#include "fixed_point.glsl"
 
 layout(std430, binding = BINDING_OUTPUT) writeonly buffer Lengths { float lengths[]; };  // (channel, row, col)
 
 uniform ivec2 u_size;  // (cols, rows)
-uniform float u_fixed_scale;  // fixed-point units per mm, as the sum passes use (crossing.glsl)
 
 uint acc[NUM_CHANNELS];
 
@@ -20,15 +20,12 @@ void main() {
     int n = load_sorted(pixel);
     if (n < 0) return;
     for (int c = 0; c < NUM_CHANNELS; c++) acc[c] = 0u;
-    // Each span adds its end minus its start in fixed point, each crossing's t rounded once: the
-    // integer sums are exact (modulo 2^32: only the length must fit), so a channel's length has the
-    // error of its crossings' t alone (as the sum passes), not that of a float32 running sum.
+    // Each span adds its end minus its start in fixed point (fixed_point.glsl, as the sum passes),
+    // each crossing's t rounded once, not a float32 running sum.
     int owner = -1;
     uint previous = 0u;
     for (int i = 0; i < n; i++) {
-        float a = round(abs(ts[i]) * u_fixed_scale);  // |t| mod 2^32, exact, as crossing.glsl takes it
-        uint magnitude = uint(a - 4294967296.0 * floor(a * (1.0 / 4294967296.0)));
-        uint units = ts[i] >= 0.0 ? magnitude : 0u - magnitude;
+        uint units = fixed_units(ts[i]);
         if (owner >= 0) acc[object_info(uint(owner)).x] += units - previous;
         previous = units;
         owner = sweep(i);
