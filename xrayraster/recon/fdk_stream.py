@@ -246,27 +246,31 @@ class FDKStream:
 
     def _filter_setup(self) -> None:
         rows = self.views.detector_shape[0]
-        defines = {**self._layout, **({"BUF": "__global", "GLOBAL_SCRATCH": 1} if self.plan.global_scratch else {})}
-        self._filter_kernel = self.ctx.kernel("fdk_filter.cl", "filter_rows", defines)
-        self._geo = _view_geometry(self.views)
         self._view_bytes = (rows + 2) * (self.views.filtered_cols + 2) * 4
+        if not self._host_filter:  # the kernel and what it reads (the host filter needs neither)
+            defines = {**self._layout, **({"BUF": "__global", "GLOBAL_SCRATCH": 1} if self.plan.global_scratch else {})}
+            self._filter_kernel = self.ctx.kernel("fdk_filter.cl", "filter_rows", defines)
+            self._geo = _view_geometry(self.views)
         self._set_fft(extended=self._truncation is True)
 
     def _set_fft(self, extended: bool) -> None:
-        """The ramp response and twiddles for rows padded to fit the filtered columns, and the
-        extrapolated ones too when ``extended`` (a longer FFT, made only once a row needs it)."""
+        """The ramp response for rows padded to fit the filtered columns, and the extrapolated ones
+        too when ``extended`` (a longer FFT, made only once a row needs it); for the kernel, also
+        on the device in bit-reversed order, with its twiddles."""
         import pyopencl as cl
 
         self._extended = extended
         response = ramp_response(self.views.filtered_cols + (2 * self._pad if extended else 0), self.views.pixel_pitch,
                                  *self._window)
         n = len(response)
+        self._response_host = response
+        self._n_fft = n
+        if self._host_filter:
+            return
         bits = int(math.log2(n))
         reverse = np.array([int(f"{k:0{bits}b}"[::-1], 2) for k in range(n)])
-        self._response_host = response
         self._response = self.ctx.buffer((response[reverse] / n).astype(np.float32), "r")
         self._twiddle = self.ctx.buffer(np.exp(-2j * np.pi * np.arange(n // 2) / n).astype(np.complex64), "r")
-        self._n_fft = n
         self._local_size = int(min(self.ctx.info.max_work_group, n // 2, 256))
         self._local_scratch = cl.LocalMemory(n * 8)
 
