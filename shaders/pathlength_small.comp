@@ -1,12 +1,14 @@
 #version 430 core
-// Crossing pass 1: one invocation per triangle. A triangle whose pixel box holds at most
-// MAX_SMALL_PIXELS pixel centres is tested exactly against each of those pixels' rays here:
-// for the small triangles of dense meshes this beats the rasteriser, whose cost is per
-// primitive. Larger triangles are appended to a list for the rasterised pass 2, as a
-// glDrawArraysIndirect command (6 vertices each: see pathlength_large.vert).
-#include "ray.glsl"
+// Crossing pass 1: one invocation per triangle. It projects the triangle and lists the pixel
+// centres its box holds, two to an entry (candidates.glsl), for pass 1b
+// (pathlength_candidates.comp), which tests them exactly. Testing them here, in a loop whose trip
+// count differs from lane to lane, kept most SIMD lanes idle: on llvmpipe the split is 1.4-1.6x
+// faster (BENCHMARKS.md). A triangle whose box holds more than MAX_SMALL_PIXELS pixel centres is
+// appended instead to a list for the rasterised pass 2, as a glDrawArraysIndirect command
+// (6 vertices each: see pathlength_large.vert): for large triangles the rasteriser's per-pixel
+// cost beats a loop.
 #include "scene.glsl"
-#include "crossing.glsl"
+#include "candidates.glsl"
 #include "grow.glsl"
 
 layout(local_size_x = 64) in;
@@ -37,11 +39,18 @@ void main() {
         for (int k = 0; k < 6; ++k) large_corners[6u * slot + uint(k)] = corners[k];
         return;
     }
-    for (int y = first.y; y <= last.y; ++y) {
-        for (int x = first.x; x <= last.x; ++x) {
-            float t;
-            int side = hit_triangle(pixel_ray(vec2(x, y) + 0.5), tri.a, tri.b, tri.c, t);
-            if (side != 0) record_crossing(ivec2(x, y), tri.object, side, t);
-        }
+    // One flat loop, the pixel stepped along the box's rows: cheaper than two nested loops.
+    // The box's pixels row by row, two to an entry, in one flat loop (cheaper than two nested).
+    uint count = uint(n.x * n.y);
+    uint entries = (count + 1u) / 2u;
+    uint base = atomicAdd(candidate_count, entries);
+    uint room = base < u_candidate_capacity ? min(entries, u_candidate_capacity - base) : 0u;
+    ivec2 px = first;
+    for (uint k = 0u; k < room; ++k) {
+        uint a = uint(px.x) | (uint(px.y) << 16);
+        if (++px.x > last.x) px = ivec2(first.x, px.y + 1);
+        uint b = 2u * k + 1u < count ? uint(px.x) | (uint(px.y) << 16) : NO_PIXEL;
+        if (++px.x > last.x) px = ivec2(first.x, px.y + 1);
+        candidates[base + k] = uvec4(index, a, b, 0u);
     }
 }

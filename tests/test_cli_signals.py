@@ -1,5 +1,6 @@
 """Ctrl-C and SIGTERM at any moment of ``xrayraster scan``, start-up included: exit 130 (143 for
-SIGTERM) with one line on stderr, no traceback, and nothing left beside the output directory.
+SIGTERM) with one line on stderr, no traceback, and nothing left beside the output directory; once
+the scan has finished (the process shutting down), exit 0 with the outputs in place.
 
 The runs are sequential (the machine may have two cores) and each is cut short, about 15 s in all.
 ``--quiet`` keeps the progress bar off stderr, so stderr holds only the command's own lines.
@@ -18,7 +19,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-EXAMPLE = "examples/twin_small.toml"  # the full scan takes 7-10 s on two CPU cores
+EXAMPLE = "examples/twin_small.toml"  # start-up and scan take 4-5 s on two CPU cores
 
 
 def _console_script() -> list[str]:
@@ -29,7 +30,7 @@ def _console_script() -> list[str]:
 
 def _scan_cut_short(tmp_path: Path, signum: int, after_s: float) -> tuple[int | None, str]:
     """Start the scan, send ``signum`` ``after_s`` seconds in; (exit status, stderr), or (None, stderr)
-    when the scan finished before the signal (a fast machine)."""
+    when the process had ended before the signal (a fast machine)."""
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
     out = tmp_path / "out" / "scan"
     out.parent.mkdir()  # made here so that it can be checked for leftovers whenever the signal comes
@@ -50,12 +51,15 @@ def _scan_cut_short(tmp_path: Path, signum: int, after_s: float) -> tuple[int | 
 
 @pytest.mark.parametrize("signum, after_s, status", [
     (signal.SIGINT, 0.2, 130), (signal.SIGINT, 0.5, 130), (signal.SIGINT, 1.0, 130), (signal.SIGINT, 2.0, 130),
-    (signal.SIGINT, 4.0, 130), (signal.SIGTERM, 2.0, 143),
-], ids=["int-0.2s", "int-0.5s", "int-1s", "int-2s", "int-4s", "term-2s"])
+    (signal.SIGINT, 3.0, 130), (signal.SIGTERM, 2.0, 143),
+], ids=["int-0.2s", "int-0.5s", "int-1s", "int-2s", "int-3s", "term-2s"])
 def test_a_signal_at_any_moment_exits_in_one_line_and_leaves_nothing(tmp_path, signum, after_s, status):
     returncode, err = _scan_cut_short(tmp_path, signum, after_s)
     if returncode is None:
         shutil.rmtree(tmp_path / "out")
+        pytest.skip(f"the scan finished within {after_s} s, before the signal")
+    if returncode == 0:  # the signal came after the scan had finished, as the process shut down: ignored
+        assert err == "" and (tmp_path / "out" / "scan" / "volume.tif").is_file()
         pytest.skip(f"the scan finished within {after_s} s, before the signal")
     assert returncode == status, err
     assert "Traceback" not in err and "Exception ignored" not in err, err

@@ -50,7 +50,7 @@ def test_release_frees_the_context(gl):  # gl: skip (or fail) where no driver ex
 
 
 def test_shaders_expand_includes_and_defines():
-    text = glcontext.shader_source("pathlength_small.comp", {"MAX_SMALL_PIXELS": 7})
+    text = glcontext.shader_source("pathlength_candidates.comp", {"MAX_SMALL_PIXELS": 7})
     assert text.startswith("#version 430 core\n#define MAX_SMALL_PIXELS 7\n")
     assert "#include" not in text and "int hit_triangle(" in text
 
@@ -77,7 +77,7 @@ def test_binding_slots_are_written_once_in_python():
             for name in re.findall(r"binding = TEXTURE_(\w+)", text):
                 assert name.lower() in TEXTURES, (path.name, name)
                 textures += 1
-    assert blocks == 13 and all(0 <= slot < 8 for slot in BINDINGS.values())  # every block in shaders/ counted
+    assert blocks == 14 and all(0 <= slot < 8 for slot in BINDINGS.values())  # every block in shaders/ counted
     assert textures == 2 and len(set(TEXTURES.values())) == len(TEXTURES)
     slots = sorted(BINDINGS.values())
     shared = {slot for slot in slots if slots.count(slot) > 1}

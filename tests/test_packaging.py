@@ -22,7 +22,7 @@ def test_every_shader_file_is_package_data():
 
 
 def test_console_script_and_readme():
-    assert PYPROJECT["project"]["scripts"]["xrayraster"] == "xrayraster.cli:main"
+    assert PYPROJECT["project"]["scripts"]["xrayraster"] == "xrayraster.cli:run"
     assert (ROOT / PYPROJECT["project"]["readme"]).is_file()
 
 

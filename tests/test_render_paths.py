@@ -113,7 +113,8 @@ def test_bad_split_is_refused(gl):
 
 
 def test_triangle_pass_spans_two_dispatch_dimensions(gl):
-    """Scenes beyond 65535 × 64 triangles need a 2-D dispatch; force it with a tiny row limit."""
+    """Scenes beyond 65535 × 64 triangles (or candidate entries) need a 2-D dispatch; force both
+    passes into one with a tiny row limit."""
     scene = one_material_scene(2)
     geom = xr.ConeBeamGeometry(40.0, 100.0, (N, N), 0.2, [0.2])
     with xr.Renderer(geom, context=gl) as r:
@@ -121,3 +122,26 @@ def test_triangle_pass_spans_two_dispatch_dimensions(gl):
         r.engine._max_groups = 7  # 2,104 triangles: 33 groups in rows of 7, the last row partly empty
         assert scene.num_triangles > 7 * 64 * 2
         np.testing.assert_array_equal(r.path_lengths(scene), want)
+
+
+@pytest.mark.parametrize("overlap", ["sum", "resolve"])
+def test_a_full_candidate_buffer_grows_and_the_view_runs_again(gl, overlap):
+    """Pass 1 lists more candidates than its buffer holds: nothing of the cut-short run stays
+    (its sums, or its list nodes), and the lengths are the same bytes as with room to spare."""
+    scene = one_material_scene(4)
+    geom = xr.ConeBeamGeometry(40.0, 100.0, (N, N), 0.2, [0.7])
+    with xr.Renderer(geom, context=gl, overlap=overlap) as r:
+        engine = r.engine
+
+        def nodes():  # crossing-list nodes taken in the view
+            with gl.current():
+                return np.frombuffer(engine._buffers["stripes"].read(), np.uint32).sum()
+
+        want = r.path_lengths(scene)
+        crossings = nodes() if overlap == "resolve" else None
+        engine._candidate_capacity = 1000  # about a fifth of what the view lists: crossings are cut short
+        got = r.path_lengths(scene)
+        assert engine._candidate_capacity > 4000
+        assert overlap == "sum" or nodes() == crossings
+    np.testing.assert_array_equal(got, want)
+    assert want.max() > 5.0  # the spheres, slivers and boxes were drawn

@@ -59,6 +59,15 @@ def main(argv=None) -> int:
         if interrupts.received():  # third-party code turned the interrupt into another exception
             return _interrupted()
         return _failed(exc, verbose)
+    finally:
+        interrupts.done()
+
+
+def run() -> int:
+    """The console script and ``python -m xrayraster``: :func:`main` as the whole process, so a
+    signal after the command has finished (while the process shuts down) is ignored."""
+    interrupts.exit_when_done()
+    return main()
 
 
 def _interrupted() -> int:

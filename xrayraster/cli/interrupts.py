@@ -13,6 +13,12 @@ not always let it through, so an interrupt is made to arrive however it is handl
   on it delivers the signal again (:func:`_redeliver`); :func:`_unraisable` keeps it off stderr.
 
 A repeated signal while one is on its way out is ignored: raising again could cut its cleanup short.
+
+When the command line is the process (the console script, ``python -m xrayraster``), a signal
+after the command has finished is ignored too (:func:`exit_when_done`): the process's teardown
+(the GL and OpenCL drivers unloading) can take a moment, and Python restores the default action
+of its signals while it shuts down, so a Ctrl-C then would kill a finished command (exit -2,
+nothing said) instead of letting it exit with its own status.
 """
 
 from __future__ import annotations
@@ -24,7 +30,7 @@ import threading
 import weakref
 from contextlib import contextmanager
 
-__all__ = ["Terminated", "deferred", "handled", "install", "received"]
+__all__ = ["Terminated", "deferred", "done", "exit_when_done", "handled", "install", "received"]
 
 
 class Interrupted(KeyboardInterrupt):
@@ -41,6 +47,8 @@ _held = False  # a signal came while deferred
 _redelivering = False
 _handled = False
 _watch: weakref.ref | None = None  # the exception last raised for the signal
+_exiting = False  # the command line is the process: ignore signals once the command is done
+_done = False
 _REDELIVERY_DELAY_S = 0.01
 
 
@@ -50,8 +58,8 @@ def install() -> None:
     For the rest of the process (so also while it shuts down); each call starts afresh, as the
     tests call the command line more than once in one process.
     """
-    global _signum, _deferring, _held, _redelivering, _handled, _watch
-    _signum, _deferring, _held, _redelivering, _handled, _watch = None, False, False, False, False, None
+    global _signum, _deferring, _held, _redelivering, _handled, _watch, _done
+    _signum, _deferring, _held, _redelivering, _handled, _watch, _done = None, False, False, False, False, None, False
     signal.signal(signal.SIGINT, _handler)
     signal.signal(signal.SIGTERM, _handler)
     sys.unraisablehook = _unraisable
@@ -66,6 +74,24 @@ def handled() -> None:
     """The command line has caught the interrupt (or reported its substitute): deliver it no more."""
     global _handled
     _handled = True
+
+
+def exit_when_done() -> None:
+    """The process ends when the command does (the console script): from :func:`done` on, ignore
+    SIGINT and SIGTERM for the rest of the process."""
+    global _exiting
+    _exiting = True
+
+
+def done() -> None:
+    """The command has finished: its outputs are complete, or its interrupt or error reported.
+    Only where :func:`exit_when_done` was called: signals are ignored from here on (an in-process
+    caller, such as a test, keeps its handlers)."""
+    global _done
+    if _exiting:
+        _done = True  # first, so a signal arriving inside this function is ignored too
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # Python leaves ignored signals so at shutdown
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
 
 
 @contextmanager
@@ -83,6 +109,8 @@ def deferred():
 
 def _handler(signum, frame) -> None:
     global _signum, _held, _redelivering
+    if _done:
+        return  # the command has finished (done)
     if _signum is not None and not _redelivering:
         return  # a repeat
     _signum = _signum or signum

@@ -5,7 +5,7 @@ as defines.
 ``layout(std430, binding = BINDING_HEADS)``, and Python binds with
 ``buffer.bind_to_storage_buffer(BINDINGS["heads"])``: a slot number appears nowhere else.
 
-Slots 0-7 only (OpenGL 4.3 guarantees 8). Two pairs share a slot because no pass uses both:
+Slots 0-7 only (OpenGL 4.3 guarantees 8). Two buffers share a slot because no pass uses both:
 ``accumulators`` (the single-pass sum) and ``heads`` (the per-pixel lists of the overlap passes)
 are chosen by the ``RESOLVE`` define of ``shaders/crossing.glsl``.
 
@@ -18,6 +18,7 @@ storage-buffer element (measured: 3 vec4 per triangle of 3.3 M, 26 ms against 16
 from __future__ import annotations
 
 BINDINGS = {
+    "candidates": 0,  # crossing pass 1's (triangle, pixel) candidates for pass 1b, and their count
     "output": 1,  # what a resolve pass writes: path lengths, or packed labels
     "stripes": 2,  # nodes taken in each stripe of the node pool
     "large": 3,  # indirect draw command + the triangles the rasteriser draws
