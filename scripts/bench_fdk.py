@@ -11,7 +11,9 @@ one ray per pixel centre) and stored as float32; projections are cached in out/b
 
 Both codes reconstruct with the plain ramp (Ram-Lak), from identical float32 arrays. Times:
 ours = ``xr.fdk`` with a warm ``CLContext`` (kernels compiled), the compile time of the first
-call measured separately; RTK = ``FDKConeBeamReconstructionFilter.Update()`` with 2 threads, 16
+call measured separately, and, where the device runs the 16-lane (AVX-512) backprojection, also
+with the 8-lane (AVX2) one it replaced (``ours_8_lanes_s``, and its largest difference from the
+16-lane volume); RTK = ``FDKConeBeamReconstructionFilter.Update()`` with 2 threads, 16
 projections per pass (scripts/peers/rtk_peer.py). Best of ``repeats`` each. Voxel updates per second =
 voxels × views / seconds.
 
@@ -43,6 +45,7 @@ from pathlib import Path
 import numpy as np
 
 import xrayraster as xr
+import xrayraster.recon.fdk_stream as fdk_stream
 from references.phantoms import project, shepp_logan_3d, sphere, voxel_values
 from scripts import bench_fdk_cases, common
 from scripts.common import best_of, say
@@ -108,6 +111,16 @@ def run_case(n: int, ctx, with_rtk: bool, cache: Path) -> dict:
     rec["ours_rmse_rel"] = float(np.sqrt(np.mean((ours[mask] - truth[mask]) ** 2)) / MU)
     say(f"  ours: {t:.3f} s ({rec['updates'] / t / 1e9:.2f} G voxel-updates/s; first call incl. compile "
         f"{rec['ours_first_call_s']:.2f} s), RMSE away from edges {rec['ours_rmse_rel']:.5f} of μ_skull")
+    if fdk_stream.WINDOW_LANES == "auto":
+        fdk_stream.WINDOW_LANES = 8
+        try:
+            t8, narrow = best_of(lambda: xr.fdk(p, g, vol, context=ctx).data / 10.0, REPEATS[n])
+        finally:
+            fdk_stream.WINDOW_LANES = "auto"
+        rec["ours_8_lanes_s"] = t8
+        rec["ours_8_lanes_max_diff_rel"] = float(np.abs(narrow - ours).max() / MU)
+        say(f"  ours with 8 lanes (AVX2): {t8:.3f} s, {t8 / t:.2f}× the time; max |8 lanes − default| "
+            f"{rec['ours_8_lanes_max_diff_rel']:.2e} of μ_skull")
     if with_rtk:
         runs = [rtk_peer.rtk_fdk(p, g, vol, threads=2) for _ in range(REPEATS[n])]
         rtk = runs[-1]["volume"]

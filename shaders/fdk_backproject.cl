@@ -88,14 +88,17 @@ __kernel void backproject(__global float* restrict volume,          // (nz, ny, 
     for (int kk = 0; kk < ZCHUNK && k0 + kk < nz; ++kk) volume[((size_t)(k0 + kk) * ny + j) * nx + i] += acc[kk];
 }
 
-#if defined(UPRIGHT) && defined(COLUMN_MAJOR) && defined(__AVX2__)
+// Built when the host defines WIDTH (8 or 16) and GROUPS.
+#if defined(UPRIGHT) && defined(COLUMN_MAJOR) && defined(GROUPS) && defined(__AVX2__) && \
+    (WIDTH == 8 || (WIDTH == 16 && defined(__AVX512F__)))
 // The CPU path (x86 with AVX2, e.g. PoCL) for upright detectors and column-major views. A
-// work-item owns 8 × GROUPS voxels of a z column as GROUPS float8s. Per view, the rows of a float8's 8
-// voxels lie in a short run of the two detector columns around the voxel's column: four
-// contiguous vector loads of 16 rows and vpermps spread them to the lanes, instead of 32
-// scalar loads. Runs longer than 16 rows (voxels much coarser than the pixels) take the scalar
-// path. Only operators and clang vector builtins appear here: PoCL calls OpenCL builtins
-// (vload8, select, shuffle2, clamp...) as out-of-line functions, which undoes the vectors.
+// work-item owns WIDTH × GROUPS voxels of a z column as GROUPS vectors of WIDTH floats: 8 with
+// AVX2, 16 with AVX-512 (the host asks for 16 first). Per view, the rows of a vector's voxels lie
+// in a short run of the two detector columns around the voxel's column: a few contiguous vector
+// loads and permutes spread them to the lanes, instead of 4 × WIDTH scalar loads. Runs longer
+// than the loads hold (voxels much coarser than the pixels) take the scalar path. Only operators
+// and clang vector builtins appear here: PoCL calls OpenCL builtins (vload8, select, shuffle2,
+// clamp...) as out-of-line functions, which undoes the vectors.
 // The host pads the filtered buffer so a window may read past the last column.
 typedef float float8u __attribute__((ext_vector_type(8), aligned(4)));  // unaligned float8 loads
 
@@ -150,16 +153,52 @@ __attribute__((always_inline)) inline float8 window_sample(__global const float*
     return inside ? value : 0.0f;
 }
 
+#if WIDTH == 16
+typedef float float16u __attribute__((ext_vector_type(16), aligned(4)));  // unaligned float16 loads
+typedef float16 floatw;
+typedef float16u floatwu;
+
+// 16 voxels: two loads of 16 rows per detector column hold a window of 32 rows, and vpermt2ps
+// picks each lane's pixel and the one below from it: spans of up to 30 rows, so voxels up to
+// twice the magnified pixel take this path. Else each half takes window_sample's.
+__attribute__((always_inline)) inline float16 window_sample16(__global const float* qc, int pitch, float16 row,
+                                                              float fc, float row_end) {
+    const float row_min = row.s0 < row.sf ? row.s0 : row.sf, row_max = row.s0 < row.sf ? row.sf : row.s0;
+    if (row_min >= 0.0f && row_max < row_end && (int)row_max - (int)row_min < 31) {
+        const int16 r = __builtin_convertvector(row, int16);  // floor: row ≥ 0
+        const int start = (int)row_min;
+        const int16 k = r - start;
+        const float16 a0 = *(__global const float16u*)(qc + start), a1 = *(__global const float16u*)(qc + start + 16);
+        const float16 b0 = *(__global const float16u*)(qc + pitch + start);
+        const float16 b1 = *(__global const float16u*)(qc + pitch + start + 16);
+        const float16 p00 = __builtin_ia32_vpermi2varps512(a0, k, a1), p10 = __builtin_ia32_vpermi2varps512(a0, k + 1, a1);
+        const float16 p01 = __builtin_ia32_vpermi2varps512(b0, k, b1), p11 = __builtin_ia32_vpermi2varps512(b0, k + 1, b1);
+        const float16 low = p00 + fc * (p01 - p00), high = p10 + fc * (p11 - p10);
+        return low + (row - __builtin_convertvector(r, float16)) * (high - low);
+    }
+    float16 value;
+    value.lo = window_sample(qc, pitch, row.lo, fc, row_end);
+    value.hi = window_sample(qc, pitch, row.hi, fc, row_end);
+    return value;
+}
+#define WINDOW_SAMPLE window_sample16
+#define LANES (float16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15)
+#else
+typedef float8 floatw;
+typedef float8u floatwu;
+#define WINDOW_SAMPLE window_sample
+#define LANES (float8)(0, 1, 2, 3, 4, 5, 6, 7)
+#endif
+
 __kernel void backproject_windowed(__global float* restrict volume, __global const float* restrict filtered,
                                    __constant float* matrices, __constant float* scale,
                                    int views, int rows, int cols, int nx, int ny, int nz) {
-    const int i = get_global_id(0), j = get_global_id(1), k0 = get_global_id(2) * (8 * GROUPS);
+    const int i = get_global_id(0), j = get_global_id(1), k0 = get_global_id(2) * (WIDTH * GROUPS);
     if (i >= nx || j >= ny || k0 >= nz) return;
     const int pitch = rows + 2;
     const size_t plane = (size_t)pitch * (cols + 2);
     const float col_end = (float)(cols + 1), row_end = (float)(rows + 1);
-    const float8 lane = (float8)(0, 1, 2, 3, 4, 5, 6, 7);
-    float8 acc[GROUPS];
+    floatw acc[GROUPS];
     for (int g = 0; g < GROUPS; ++g) acc[g] = 0.0f;
     for (int view = 0; view < views; ++view) {
         __constant float* m = matrices + 12 * view;
@@ -169,13 +208,14 @@ __kernel void backproject_windowed(__global float* restrict volume, __global con
         const int c = (int)col;
         const float weight = scale[view] * inv * inv;
         const float drow = m[6] * inv;
-        const float8 row = (m[4] * i + m[5] * j + m[6] * k0 + m[7]) * inv + 1.0f + lane * drow;
+        const floatw row = (m[4] * i + m[5] * j + m[6] * k0 + m[7]) * inv + 1.0f + LANES * drow;
         __global const float* qc = filtered + view * plane + (size_t)c * pitch;
         #pragma unroll
-        for (int g = 0; g < GROUPS; ++g) acc[g] += weight * window_sample(qc, pitch, row + (8.0f * g) * drow, col - c, row_end);
+        for (int g = 0; g < GROUPS; ++g)
+            acc[g] += weight * WINDOW_SAMPLE(qc, pitch, row + ((float)WIDTH * g) * drow, col - c, row_end);
     }
-    float out[8 * GROUPS];
-    for (int g = 0; g < GROUPS; ++g) *(float8u*)(out + 8 * g) = acc[g];
-    for (int kk = 0; kk < 8 * GROUPS && k0 + kk < nz; ++kk) volume[((size_t)(k0 + kk) * ny + j) * nx + i] += out[kk];
+    float out[WIDTH * GROUPS];
+    for (int g = 0; g < GROUPS; ++g) *(floatwu*)(out + WIDTH * g) = acc[g];
+    for (int kk = 0; kk < WIDTH * GROUPS && k0 + kk < nz; ++kk) volume[((size_t)(k0 + kk) * ny + j) * nx + i] += out[kk];
 }
 #endif

@@ -37,13 +37,14 @@ from .volume import MM_TO_CM, Volume
 log = logging.getLogger(__name__)
 
 ZCHUNK = 16  # voxels along z per work-item of the scalar backprojection (shaders/fdk_backproject.cl)
-MAX_GROUPS = 8  # float8s along z per work-item of backproject_windowed: up to 64 voxels
+WINDOW_VOXELS = 64  # voxels along z per work-item of backproject_windowed, at most (measured best on 2 cores)
 SLAB_MULTIPLE = 64  # slabs are cut at multiples of both
 TILE = (16, 16, 1)  # work-group: a 16×16 column of voxels reads a compact patch of every view
 MAX_BATCH_VIEWS = 256  # views per backprojection launch: 48 bytes each of constant memory
 # Kernel choices, normally automatic; the tests set them to check every path on one device.
 LAYOUT = "auto"  # filtered views by "rows" (GPUs), by "columns" (CPUs), or "auto" by device type
-VECTORISED = True  # backproject_windowed where it applies (x86 CPUs with AVX2, upright detectors)
+WINDOW_LANES = "auto"  # backproject_windowed's vector width where it applies (x86 CPUs, upright detectors):
+# "auto" 16 with AVX-512, else 8 with AVX2; 16 or 8 (if the device has it); 0: the scalar kernel
 HOST_FILTER = "auto"  # rows filtered on the host (host_filter.py): "auto" on CPU devices, True, False
 DEVICE_SHARE = 0.8  # of the device's global memory we plan to use
 WINDOW_PAD = 32 * 4  # bytes after each batch of filtered views: backproject_windowed reads past the last column
@@ -322,13 +323,17 @@ class FDKStream:
 
         matrices = self.views.matrices
         upright = not np.any(matrices[:, :, 2][:, [0, 2]])  # column and depth constant along z
-        # As many float8s per work-item as the slab fills, up to MAX_GROUPS (measured best on 2 cores).
-        groups = min(MAX_GROUPS, 1 << max(0, math.ceil(math.log2(-(-self.plan.slab // 8)))))
-        defines = {"ZCHUNK": ZCHUNK, "GROUPS": groups, **self._layout, **({"UPRIGHT": 1} if upright else {})}
-        kernel = None
-        if VECTORISED and upright and self._layout:  # compiled only where the device has AVX2
-            kernel = self.ctx.kernel("fdk_backproject.cl", "backproject_windowed", defines, optional=True)
-        self._zchunk = 8 * groups if kernel is not None else ZCHUNK
+        defines = {"ZCHUNK": ZCHUNK, **self._layout, **({"UPRIGHT": 1} if upright else {})}
+        kernel, self._zchunk = None, ZCHUNK
+        widths = {"auto": (16, 8), 16: (16,), 8: (8,), 0: ()}[WINDOW_LANES] if upright and self._layout else ()
+        for width in widths:  # compiled only where the device has AVX2 (8) or AVX-512 (16)
+            # As many vectors per work-item as the slab fills, up to WINDOW_VOXELS.
+            groups = min(WINDOW_VOXELS // width, 1 << max(0, math.ceil(math.log2(-(-self.plan.slab // width)))))
+            kernel = self.ctx.kernel("fdk_backproject.cl", "backproject_windowed",
+                                     {**defines, "WIDTH": width, "GROUPS": groups}, optional=True)
+            if kernel is not None:
+                self._zchunk = width * groups
+                break
         self._bp_kernel = kernel or self.ctx.kernel("fdk_backproject.cl", "backproject", defines)
         fits = self._bp_kernel.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, self.ctx.device)
         self._tile = TILE if fits >= TILE[0] * TILE[1] else None  # else the driver picks
