@@ -2,7 +2,7 @@
 // Crossing pass 1: one invocation per triangle. It projects the triangle and lists the pixel
 // centres its box holds, two to an entry (candidates.glsl), for pass 1b
 // (pathlength_candidates.comp), which tests them exactly. Testing them here, in a loop whose trip
-// count differs from lane to lane, kept most SIMD lanes idle: on llvmpipe the split is 1.4-1.6x
+// count differs from lane to lane, kept most SIMD lanes idle: on llvmpipe the split is 1.4-1.5x
 // faster (BENCHMARKS.md). A triangle whose box holds more than MAX_SMALL_PIXELS pixel centres is
 // appended instead to a list for the rasterised pass 2, as a glDrawArraysIndirect command
 // (6 vertices each: see pathlength_large.vert): for large triangles the rasteriser's per-pixel

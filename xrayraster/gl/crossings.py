@@ -11,7 +11,7 @@ that find the candidate pixels and test them:
    whose projected box holds at most ``small_triangle_pixels`` pixel centres, those pixels as
    candidates (two to an entry), and lists the larger triangles apart;
 1b. a compute pass over the candidates (``shaders/pathlength_candidates.comp``) runs the exact
-   test of each, every SIMD lane busy whatever the size of the boxes (measured: 1.4-1.6x faster
+   test of each, every SIMD lane busy whatever the size of the boxes (measured: 1.4-1.5x faster
    on llvmpipe than testing each box in pass 1, BENCHMARKS.md);
 2. the rasteriser draws each large triangle grown by a margin (``shaders/grow.glsl``), and the
    fragment stage runs the exact test for every pixel it covers.
