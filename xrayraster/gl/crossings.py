@@ -97,7 +97,7 @@ class CrossingEngine:
         self._scene: UploadedScene | None = None
         self._buffers: dict[str, moderngl.Buffer] = {}
         self._stripe_capacity = 0  # crossing nodes each stripe of the node pool holds
-        self._candidate_capacity = 0  # candidate entries crossing pass 1 can list (0: not sized yet)
+        self._candidate_capacity = 0  # candidate entries crossing pass 1 can list (0: sized on the first view)
         self.max_crossings = MIN_CROSSINGS  # list room per pixel of the resolve passes
 
     @property
@@ -235,8 +235,10 @@ class CrossingEngine:
             getattr(uploaded, name).bind_to_storage_buffer(BINDINGS[name])
         triangle_groups = (uploaded.num_triangles + 63) // 64
         wide = min(triangle_groups, self._max_groups)
+        if not self._candidate_capacity:
+            self._candidate_capacity = uploaded.num_triangles + 1024  # about an entry a triangle, measured
         while True:
-            capacity = self._candidate_capacity or uploaded.num_triangles + 1024  # ~1 entry a triangle, measured
+            capacity = self._candidate_capacity
             candidates = self.scratch("candidates", CANDIDATES_HEADER + ENTRY_BYTES * capacity)
             candidates.write(bytes(CANDIDATES_HEADER))
             candidates.bind_to_storage_buffer(BINDINGS["candidates"])
@@ -253,7 +255,6 @@ class CrossingEngine:
             self._vao(large).render_indirect(uploaded.large, moderngl.TRIANGLES, count=1)
             self.gl.ctx.memory_barrier()
             found = int(np.frombuffer(candidates.read(size=4), np.uint32)[0])
-            self._candidate_capacity = capacity
             if found <= capacity:
                 return
             self._grow_candidates(found)
@@ -299,14 +300,15 @@ class CrossingEngine:
             heads = self._buffers["heads"] = self.gl.ctx.buffer(np.full(rows * cols, _END, np.uint32).tobytes())
             self._grow_node_pool(4 * rows * cols >> NODE_STRIPE_BITS)
         stripes = self.scratch("stripes", 4 << NODE_STRIPE_BITS)
+        unused = bytes(4 << NODE_STRIPE_BITS)  # no node taken in any stripe
         while True:
             heads.bind_to_storage_buffer(BINDINGS["heads"])
             self._buffers["nodes"].bind_to_storage_buffer(BINDINGS["nodes"])
-            stripes.write(bytes(4 << NODE_STRIPE_BITS))
+            stripes.write(unused)
             stripes.bind_to_storage_buffer(BINDINGS["stripes"])
             self._record(uploaded, view, table, {"RESOLVE": 1, "NODE_STRIPE_BITS": NODE_STRIPE_BITS},
                          {"u_stripe_capacity": self._stripe_capacity},
-                         lambda: (self._empty_lists(), stripes.write(bytes(4 << NODE_STRIPE_BITS))))
+                         lambda: (self._empty_lists(), stripes.write(unused)))
             used = np.frombuffer(stripes.read(), np.uint32)
             if used.max() <= self._stripe_capacity:
                 return CrossingLists(self, uploaded)
