@@ -189,15 +189,15 @@ def sampled_signal(lengths, mu, photons, efficiency, energies, factor, counting:
             spread = np.sqrt(np.tensordot(energies**2, detected, axes=1))
             few = detected.sum(axis=0) < EXACT_BELOW_PHOTONS
             return mean, spread, few, detected[:, few]
-        m = _table_moments(table, lengths[:, rows].reshape(len(lengths), -1).astype(np.float64), mu,
+        m = _table_moments(table, lengths[:, rows].reshape(len(lengths), -1), mu,
                            moment_weights(photons, efficiency, energies))
-        m *= factor[rows].reshape(-1, 1)
+        m *= factor[rows].reshape(1, -1)
         if counting:
-            return m[:, 2].reshape(-1, cols), None, None, None
-        few = (m[:, 2] < EXACT_BELOW_PHOTONS).reshape(-1, cols)
+            return m[2].reshape(-1, cols), None, None, None
+        few = (m[2] < EXACT_BELOW_PHOTONS).reshape(-1, cols)
         detected = transmitted_photons(lengths[:, rows][:, few][:, None], mu, photons * efficiency,
                                        factor[rows][few][None])[:, 0]
-        return m[:, 0].reshape(-1, cols), np.sqrt(m[:, 1]).reshape(-1, cols), few, detected
+        return m[0].reshape(-1, cols), np.sqrt(m[1]).reshape(-1, cols), few, detected
 
     # Draws happen block after block in row order, so the bytes depend on the seed only.
     blocks = _row_blocks(mu.shape[1] if table is None else TABLE_BLOCK_BINS, *lengths.shape[1:])
@@ -213,17 +213,19 @@ def sampled_signal(lengths, mu, photons, efficiency, energies, factor, counting:
 
 
 def _table_moments(table: SpectralTable, lengths: np.ndarray, mu: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Moments (pixels, 3) for path lengths (channels, pixels): interpolated in ``table`` where a
-    pixel's ray crosses the scene, the open beam's exact sums where it crosses nothing (most of the
-    detector behind a thin sample: 86 % of it in a woven plate's scan), exact outside the table."""
-    m = np.empty((lengths.shape[1], len(q)))
-    crossed = lengths.any(axis=0)
-    m[~crossed] = exact_moments(np.zeros((len(lengths), 1)), mu, q)[:, 0]
-    lengths = lengths[:, crossed]
-    interpolated, inside = table.moments(lengths)
-    if not inside.all():
-        interpolated[~inside] = exact_moments(lengths[:, ~inside], mu, q).T
-    m[crossed] = interpolated
+    """Moments (3, pixels) float64 for path lengths (channels, pixels) mm: interpolated in ``table``
+    where a pixel's ray crosses the scene, the open beam's exact sums where it crosses nothing (most
+    of the detector behind a thin sample: 86 % of it in a woven plate's scan, so only the crossed
+    pixels are converted, looked up and scattered back), exact outside the table."""
+    m = np.empty((len(q), lengths.shape[1]))
+    m[:] = exact_moments(np.zeros((len(lengths), 1)), mu, q)
+    crossed = np.flatnonzero(lengths.any(axis=0))
+    if crossed.size:
+        lengths = lengths[:, crossed].astype(np.float64)
+        interpolated, inside = table.moments(lengths)
+        if not inside.all():
+            interpolated[~inside] = exact_moments(lengths[:, ~inside], mu, q).T
+        m[:, crossed] = interpolated.T
     return m
 
 
