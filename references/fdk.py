@@ -11,8 +11,9 @@ backprojection are written out below from their textbook definitions and the con
   view is read from its 12-vector ``s|r, d, u, v``; pixel ``(row, col)`` is centred at
   ``d + (col − (ncol−1)/2)·u + (row − (nrow−1)/2)·v``.
 * **Cosine weight** (cone): the cosine of the angle between the ray to the pixel centre and
-  the detector normal, ``n̂·(p − s)/|p − s|`` (the same number as ``D/|p − s|`` on a flat
-  detector); 1 for parallel beams.
+  the horizontal line from the source to the rotation axis, ``ŝ·(p − s)/|p − s|`` with
+  ``ŝ = −(s_x, s_y, 0)/|(s_x, s_y)|`` (the same number as ``D/|p − s|`` on a detector facing the
+  axis; the fan-beam change of variables measures ray angles from that line); 1 for parallel beams.
 * **Redundancy weight** W per view and column, for the line through the pixel centre of the
   detector's middle row (``row = (nrow−1)/2``), projected onto the xy-plane: its fan angle γ
   (from the central ray, the source's direction to the axis, counter-clockwise about +z) and its
@@ -22,8 +23,10 @@ backprojection are written out below from their textbook definitions and the con
   - full scan, laterally displaced detector (Wang 2002): with Δ the half-width of the band of
     lines seen on both sides of the axis, ``W = sin²(π/4·(1 + t/Δ))`` inside it (t measured
     positive towards the detector's long side, +t for a centred view), 1 on the long side beyond
-    it. Chosen (``displaced="auto"``) when in some view the two ends' offsets, t_min + t_max,
-    differ by more than 2 % of t_max − t_min; else ½ everywhere. ``True``/``False`` force it;
+    it. Chosen (``displaced="auto"``) when the object reaches past Δ (the smallest over the views:
+    ``object_radius_mm``, else the farthest corner of the grid's voxels from the axis) and in some
+    view the two ends' offsets, t_min + t_max, differ by more than 2 % of t_max − t_min; else ½
+    everywhere. ``True``/``False`` force it;
   - short scan (Parker 1982, in the generalised form with the overscan angle δ = (arc − π)/2
     in place of the half fan angle, Wesarg et al. 2002): with β the source angle from the
     start of the arc,
@@ -162,12 +165,13 @@ class _View:
         return self.d + a[..., None] * self.u + b[..., None] * self.v
 
     def cosine(self, shape) -> np.ndarray:
-        """(rows, cols): cos of the angle between each pixel's ray and the detector normal."""
+        """(rows, cols): cos of the angle between each pixel's ray and the source's horizontal line to the axis."""
         if not self.cone:
             return np.ones(shape)
         rr, cc = np.meshgrid(np.arange(shape[0]), np.arange(shape[1]), indexing="ij")
         ray = self.pixel_centres(rr, cc, shape) - self.s
-        return (ray @ self.n) / np.linalg.norm(ray, axis=-1)
+        toward = np.array([-self.s[0], -self.s[1], 0.0]) / math.hypot(self.s[0], self.s[1])
+        return (ray @ toward) / np.linalg.norm(ray, axis=-1)
 
     def middle_row_lines(self, shape):
         """Fan angle γ and signed axis distance t (xy-plane) of the lines through the middle row's pixels."""
@@ -267,8 +271,9 @@ def virtual_detector(views, shape, displaced: bool) -> tuple[int, int]:
     return before, after
 
 
-def redundancy_weights(views, shape, scan: str, displaced="auto"):
-    """(views, cols) redundancy weights, (views,) angular cells, and whether the scan is full."""
+def redundancy_weights(views, shape, scan: str, displaced="auto", reach_mm: float = math.inf):
+    """(views, cols) redundancy weights, (views,) angular cells, and whether the scan is full;
+    ``reach_mm``: the object's farthest distance from the axis."""
     theta = np.array([view.theta for view in views])
     full = _is_full(np.sort(theta), scan)
     cells, start, arc = angular_cells(theta, full)
@@ -280,7 +285,8 @@ def redundancy_weights(views, shape, scan: str, displaced="auto"):
         return parker_weight(beta, gamma, 0.5 * (arc - math.pi)), cells, full
     low, high = t.min(axis=1), t.max(axis=1)
     off_centre = np.abs(high + low) / (high - low)
-    if not (np.any(off_centre > 0.02) if displaced == "auto" else displaced):
+    both_sides = np.minimum(-low, high).min()
+    if not (reach_mm > both_sides and np.any(off_centre > 0.02) if displaced == "auto" else displaced):
         return np.full(t.shape, 0.5), cells, full
     weights = np.empty(t.shape)
     for i in range(len(views)):
@@ -343,7 +349,7 @@ def extrapolated(row: np.ndarray, pad: int, left: bool, right: bool) -> np.ndarr
 
 
 def filtered_projections(projections, geometry, window="ram-lak", cutoff=1.0, scan="auto", displaced="auto",
-                         truncation="auto", truncation_width=0.5):
+                         truncation="auto", truncation_width=0.5, reach_mm: float = math.inf):
     """(views, rows, before + cols + after) cosine- and redundancy-weighted, ramp-filtered
     projections (float64) on the virtual detector of :func:`virtual_detector`, the per-view
     objects, their angular cells and ``before``. With truncated rows (:func:`truncated_ends`), each
@@ -354,7 +360,7 @@ def filtered_projections(projections, geometry, window="ram-lak", cutoff=1.0, sc
     views = [_View(row, cone) for row in vec.array]
     shape = vec.detector_shape
     pitch = float(np.linalg.norm(views[0].u))
-    redundancy, cells, full = redundancy_weights(views, shape, scan, displaced)
+    redundancy, cells, full = redundancy_weights(views, shape, scan, displaced, reach_mm)
     before, after = virtual_detector(views, shape, full and not np.all(redundancy == 0.5))
     p = np.asarray(projections, dtype=np.float64)
     ends = truncated_ends(p, redundancy, truncation)
@@ -369,13 +375,40 @@ def filtered_projections(projections, geometry, window="ram-lak", cutoff=1.0, sc
     return out, views, cells, before
 
 
-def fdk_reference(projections, geometry, volume, window="ram-lak", cutoff=1.0, scan="auto", displaced="auto",
-                  truncation="auto", truncation_width=0.5) -> np.ndarray:
-    """The reconstruction, float64 (z, y, x), mm⁻¹ for line integrals in ``projections``."""
-    filtered, views, cells, before = filtered_projections(projections, geometry, window, cutoff, scan, displaced,
-                                                          truncation, truncation_width)
-    shape = np.shape(projections)[1:]
+def seen_in_every_view(geometry, volume) -> np.ndarray:
+    """Bool (z, y, x): the voxels whose centres project within the detector's outer pixel centres'
+    half-pixel rims in every view (the field of view RTK's functional tests score in). For upright
+    cone-beam views (detector columns parallel to z): along a voxel column the detector column and
+    the depth stay put and the row moves linearly, so each (y, x) column is seen over one range of
+    heights, found from two planes."""
+    vec = geometry.to_vec()
+    shape = vec.detector_shape
     x = _voxel_centres(volume)
+    nz = volume.shape[0]
+    seen = np.ones(volume.shape[1:], bool)
+    k_low, k_high = np.full(volume.shape[1:], -np.inf), np.full(volume.shape[1:], np.inf)
+    for row in vec.array:
+        view = _View(row, vec.beam == "cone")
+        row0, col, _ = view.detector_coordinates(x[0], shape)
+        step = view.detector_coordinates(x[min(1, nz - 1)], shape)[0] - row0 if nz > 1 else np.ones_like(row0)
+        seen &= (col >= -0.5) & (col <= shape[1] - 0.5)
+        with np.errstate(divide="ignore"):
+            ends = np.sort(np.stack([(-0.5 - row0) / step, (shape[0] - 0.5 - row0) / step]), axis=0)
+        k_low, k_high = np.maximum(k_low, ends[0]), np.minimum(k_high, ends[1])
+    k = np.arange(nz)[:, None, None]
+    return seen & (k >= k_low) & (k <= k_high)
+
+
+def fdk_reference(projections, geometry, volume, window="ram-lak", cutoff=1.0, scan="auto", displaced="auto",
+                  truncation="auto", truncation_width=0.5, object_radius_mm=None) -> np.ndarray:
+    """The reconstruction, float64 (z, y, x), mm⁻¹ for line integrals in ``projections``."""
+    x = _voxel_centres(volume)
+    reach = object_radius_mm
+    if reach is None:  # the grid's farthest voxel corner: the outermost centres' x and y plus half a voxel
+        reach = float(np.hypot(*(np.abs(x[0, :, :, :2]).max(axis=(0, 1)) + np.array(volume.voxel_size[:0:-1]) / 2)))
+    filtered, views, cells, before = filtered_projections(projections, geometry, window, cutoff, scan, displaced,
+                                                          truncation, truncation_width, reach)
+    shape = np.shape(projections)[1:]
     out = np.zeros(volume.shape)
     for q, view, cell in zip(filtered, views, cells):
         row, col, w = view.detector_coordinates(x, shape)

@@ -3,6 +3,7 @@
     python -m scripts.bench_dataset            # 128³: 8 samples a mode; 256³: 4 a mode (~8 min on 2 cores)
     python -m scripts.bench_dataset --quick    # 128³ only, 4 samples, one worker (~40 s)
     python -m scripts.bench_dataset --workers 1 8 --samples 32 16   # a bigger machine: pools of 1 and 8
+    python -m scripts.bench_dataset --sizes 128 --samples 24 0      # 128³ only, 24 samples a mode
 
 The samples are the reference twin's small version (``examples/twin_small.toml``: 2 × 2 woven
 cells, 20 × 20 × 4 mm, 40 kV) with its kV, exposure and weave seed drawn per sample:
@@ -124,16 +125,17 @@ def main(argv=None) -> None:
                     help="pool sizes to measure (default 1 2); Dask runs with the largest")
     ap.add_argument("--samples", type=int, nargs=2, metavar=("N128", "N256"),
                     help=f"samples a mode builds at 128³ and 256³ (default {SIZES['128'][-1]} {SIZES['256'][-1]})")
+    ap.add_argument("--sizes", nargs="+", choices=list(SIZES), default=list(SIZES), help="sizes to build (default both)")
     args = outputs(ap.parse_args(argv), "bench_dataset")
     t_start = time.perf_counter()
     command, machine = announce()
-    sizes = ["128"] if args.quick else list(SIZES)
+    sizes = ["128"] if args.quick else args.sizes
     runs = {"1 worker": {"workers": 1}} if args.quick else modes(args.workers)
     rows, split = [], {}
     say(f"{'size':>5} {'mode':>16} {'samples':>8} {'wall s':>8} {'samples/h':>10} {'steady /h':>10} "
         f"{'max |dmu| 1/cm':>16} {'same bytes':>11}")
     for size in sizes:
-        count = 4 if args.quick else args.samples[sizes.index(size)] if args.samples else SIZES[size][-1]
+        count = 4 if args.quick else args.samples[list(SIZES).index(size)] if args.samples else SIZES[size][-1]
         dataset = load_dataset_file(dataset_table(size, count), base_dir=ROOT)
         reference = None
         for mode, options in runs.items():

@@ -15,15 +15,16 @@
 
 inline float2 cmul(float2 a, float2 b) { return (float2)(a.x * b.x - a.y * b.y, a.x * b.y + a.y * b.x); }
 
-// Pre-weight of pixel (row, col): redundancy × cosine weight D / |p − s| (1 for parallel beams).
-// geo holds per view: s.xyz D, d.xyz 0, u.xyz 0, v.xyz 0 (mm).
+// Pre-weight of pixel (row, col): redundancy × cosine weight ŝ·(p − s) / |p − s| (1 for parallel
+// beams; xrayraster/recon/fdk_weights.py). geo holds per view: s, d, u, v (mm) and ŝ, the unit
+// vector from the source towards the axis, each xyz 0.
 inline float pre_weight(__global const float4* geo, __global const float* redundancy, int view, int row, int col,
                         int rows, int cols, int cone) {
     float w = redundancy[view * cols + col];
     if (cone) {
-        float4 s = geo[4 * view], d = geo[4 * view + 1], u = geo[4 * view + 2], v = geo[4 * view + 3];
-        float3 p = d.xyz + (col - 0.5f * (cols - 1)) * u.xyz + (row - 0.5f * (rows - 1)) * v.xyz;
-        w *= s.w / length(p - s.xyz);
+        __global const float4* g = geo + 5 * view;
+        float3 ray = g[1].xyz + (col - 0.5f * (cols - 1)) * g[2].xyz + (row - 0.5f * (rows - 1)) * g[3].xyz - g[0].xyz;
+        w *= dot(ray, g[4].xyz) / length(ray);
     }
     return w;
 }

@@ -58,6 +58,16 @@ def test_cone_to_vec_at_zero_and_quarter_turn_by_hand():
     np.testing.assert_allclose(v, [0.0, 0.0, 0.5], atol=1e-12)
 
 
+def test_a_source_offset_moves_the_source_in_its_plane_and_leaves_the_detector():
+    """source_offset (row, col) mm moves the source along v and u, as RTK's SourceOffsetY/X do: by
+    hand at θ = 0 and π/2; the detector is where it is without the offset."""
+    plain = ConeBeamGeometry(source_to_origin=100, source_to_detector=250, **HAND).to_vec().array
+    vec = ConeBeamGeometry(source_to_origin=100, source_to_detector=250, source_offset=(15.0, 20.0), **HAND).to_vec()
+    np.testing.assert_allclose(_split(vec.vectors[0])[0], [20.0, -100.0, 15.0], atol=1e-12)
+    np.testing.assert_allclose(_split(vec.vectors[1])[0], [100.0, 20.0, 15.0], atol=1e-12)
+    np.testing.assert_array_equal(vec.array[:, 3:], plain[:, 3:])
+
+
 def test_parallel_to_vec_at_zero_and_quarter_turn_by_hand():
     """Parallel beam: ray (0,1,0) at θ=0, (−1,0,0) at π/2; detector centre is the offset only."""
     vec = ParallelBeamGeometry(**HAND).to_vec()
@@ -157,6 +167,7 @@ def test_parallel_pixel_centres_lie_on_reference_parallel_rays(theta):
 def _examples():
     return [
         ConeBeamGeometry(100, 250, (3, 4), (0.5, 0.25), [0.0, 1.0], detector_offset=(1.0, 2.0)),
+        ConeBeamGeometry(600, 1200, (3, 4), 4.0, [0.0, 1.0], source_offset=(15.0, 20.0)),
         ConeBeamGeometry(
             np.float64(60.5),
             np.float32(140.25),
@@ -319,6 +330,8 @@ CONE = dict(source_to_origin=100, source_to_detector=250, detector_shape=(3, 4),
         ({"angles": [[0.0, 1.0], [2.0, 3.0]]}, r"^angles\b"),
         ({"detector_offset": (float("nan"), 0.0)}, r"^detector_offset\[0\]"),
         ({"detector_offset": (1.0, 2.0, 3.0)}, r"^detector_offset\b"),
+        ({"source_offset": (0.0, float("nan"))}, r"^source_offset\[1\]"),
+        ({"source_offset": "left"}, r"^source_offset\b"),
     ],
 )
 def test_cone_validation_names_the_field(change, field):

@@ -42,7 +42,7 @@ def test_dicts_round_trip_through_json(geometry):
 def test_circular_views_are_written_as_a_count():
     assert CONE.to_dict() == {
         "beam": "cone", "source_to_origin": 100.0, "source_to_detector": 250.0, "detector_shape": [12, 16],
-        "pixel_size": [0.5, 0.25], "detector_offset": [1.0, -2.0], "num_views": 90}
+        "pixel_size": [0.5, 0.25], "detector_offset": [1.0, -2.0], "source_offset": [0.0, 0.0], "num_views": 90}
     assert GEOMETRIES["cone, 3 views of 90"].to_dict()["angles_deg"] == pytest.approx([0.0, 20.0, 308.0], abs=1e-12)
 
 

@@ -24,8 +24,9 @@ The proper rotation P: (x, y, z)_ours -> (x, z, −y)_RTK maps one onto the othe
     P·v̂                = (0, 1, 0)                  = RTK detector y axis
 
 hence ``AddProjection(SID=SOD, SDD=SDD, gantryAngle=degrees(θ), ProjectionOffsetX=ou,
-ProjectionOffsetY=ov)`` with no flip of detector rows or columns and no change of rotation
-direction. Projection stack: our (views, rows, cols) array is used as is (ITK index (col, row,
+ProjectionOffsetY=ov, 0, 0, SourceOffsetX=su, SourceOffsetY=sv)`` (our source offset (sv, su)
+moves the source along v̂ and û as RTK's moves it along its detector's y and x axes) with no flip
+of detector rows or columns and no change of rotation direction. Projection stack: our (views, rows, cols) array is used as is (ITK index (col, row,
 view)), spacing (pixel_col, pixel_row, 1), origin (−(ncol−1)/2·pixel_col, −(nrow−1)/2·pixel_row,
 0), identity direction (the FDK weighting reads detector coordinates straight from the image
 origin/spacing, so the projection direction must stay identity); the detector offset goes into
@@ -113,11 +114,32 @@ def rtk_available() -> str | None:
 def _rtk_geometry(geometry: ConeBeamGeometry):
     """RTK ThreeDCircularProjectionGeometry equal to our circular cone-beam geometry."""
     g = _rtk.ThreeDCircularProjectionGeometry.New()
-    ov, ou = geometry.detector_offset
+    (ov, ou), (sv, su) = geometry.detector_offset, geometry.source_offset
     for theta in geometry.angles:
         g.AddProjection(float(geometry.source_to_origin), float(geometry.source_to_detector),
-                        math.degrees(theta), float(ou), float(ov))
+                        math.degrees(theta), float(ou), float(ov), 0.0, 0.0, float(su), float(sv))
     return g
+
+
+def rtk_fov_mask(geometry: ConeBeamGeometry, volume: VolumeGeometry) -> np.ndarray:
+    """RTK's field of view on our grid, bool ``(z, y, x)``: the voxels ``rtk.FieldOfViewImageFilter``
+    keeps (those its geometry says every projection sees), as RTK's functional tests mask their
+    reconstructions before scoring them."""
+    _init()
+    if _import_error is not None:
+        raise RuntimeError(f"RTK unavailable: {_import_error}")
+    image_type = _itk.Image[_itk.F, 3]
+    size, origin, spacing = _volume_origin_spacing(volume)
+    ones = _image(np.ones(size[::-1], np.float32), origin, spacing)
+    stack = _image(np.zeros((geometry.num_views, *geometry.detector_shape), np.float32),
+                   *_projection_origin_spacing(geometry))
+    fov = _rtk.FieldOfViewImageFilter[image_type, image_type].New()
+    fov.SetInput(0, ones)
+    fov.SetProjectionsStack(stack)
+    fov.SetGeometry(_rtk_geometry(geometry))
+    fov.Update()
+    out = _itk.array_view_from_image(fov.GetOutput())  # (ny, nz, nx): RTK (Z, Y, X)
+    return np.ascontiguousarray(out.transpose(1, 0, 2)[:, ::-1, :]) > 0.5
 
 
 def _projection_origin_spacing(geometry: ConeBeamGeometry):
@@ -227,8 +249,8 @@ def _source_and_pixels(geometry: ConeBeamGeometry, theta: float):
 
     rot = rot_z(theta)
     sod, sdd = geometry.source_to_origin, geometry.source_to_detector
-    src = rot @ (0.0, -sod, 0.0)
     u, v = rot @ (1.0, 0.0, 0.0), np.array([0.0, 0.0, 1.0])
+    src = rot @ (0.0, -sod, 0.0) + geometry.source_offset[1] * u + geometry.source_offset[0] * v
     centre = rot @ (0.0, sdd - sod, 0.0) + ou * u + ov * v
     r = (np.arange(nr) - (nr - 1) / 2) * pv
     c = (np.arange(nc) - (nc - 1) / 2) * pu
@@ -298,11 +320,13 @@ def _self_check() -> bool:
     small = ((3.0, -2.0, 1.5), 4.0, 0.05)      # off-centre sphere (x, y, z) mm
     cases = [("no offset", 180, (0.0, 0.0)),
              ("col offset +12 mm", 180, (0.0, 12.0)),
-             ("col offset -9 mm, row offset +3 mm", 90, (3.0, -9.0))]
-    for label, views, offset in cases:
+             ("col offset -9 mm, row offset +3 mm", 90, (3.0, -9.0)),
+             ("source offset (row +2, col +5) mm", 180, (0.0, 0.0), (2.0, 5.0))]
+    for label, views, offset, *source in cases:
         geo = ConeBeamGeometry(source_to_origin=100.0, source_to_detector=200.0,
                                detector_shape=(64, 96), pixel_size=0.8,
-                               angles=np.arange(views) * 2 * np.pi / views, detector_offset=offset)
+                               angles=np.arange(views) * 2 * np.pi / views, detector_offset=offset,
+                               source_offset=source[0] if source else (0.0, 0.0))
         err = _check_mapping(geo)
         report(f"{label}: geometry", err < 1e-9,
                f"RTK source/pixel positions vs ours, max |diff| = {err:.2e} mm")

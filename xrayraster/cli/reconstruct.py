@@ -55,7 +55,10 @@ def add_parser(subparsers) -> None:
                      help="full circle (redundancy ½ or displaced-detector weights) or short scan (Parker); default auto")
     rec.add_argument("--displaced", choices=tuple(SWITCH), default="auto",
                      help="full scans: Wang's displaced-detector weights on, off, or chosen from the detector's "
-                          "coverage of the axis (default auto; the choice is logged with -v)")
+                          "coverage of the axis and the object's reach (default auto; the choice is logged with -v)")
+    rec.add_argument("--object-radius", type=float, default=None, metavar="MM",
+                     help="the radius about the rotation axis outside which nothing attenuates, which --displaced "
+                          "auto weighs (default: the grid's farthest corner)")
     rec.add_argument("--truncation", choices=tuple(SWITCH), default="auto",
                      help="extrapolate rows cut off by the detector's edges (an object wider than the field of "
                           "view): the rows with signal at an edge (default auto), every row, or none")
@@ -145,7 +148,7 @@ def run(args) -> int:
               f"angular-sampling rule asks for about π/2·{n} ≈ {needed:.0f}; expect streaks", file=sys.stderr)
     start = time.perf_counter()
     vol = fdk(stack, geometry, volume, filter=args.filter, cutoff=args.cutoff, scan=args.scan, input=kind,
-              displaced=SWITCH[args.displaced], truncation=SWITCH[args.truncation],
+              displaced=SWITCH[args.displaced], object_radius_mm=args.object_radius, truncation=SWITCH[args.truncation],
               truncation_width=args.truncation_width, device=args.device)
     seconds = time.perf_counter() - start
     vz, vy, vx = volume.voxel_size

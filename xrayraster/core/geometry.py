@@ -13,7 +13,9 @@ Conventions
 * Detector images are ``(row, col)`` arrays. Columns step along ``u = R_z(θ)·(1, 0, 0)``, rows
   along ``v = (0, 0, 1)``: the row index grows with z, as in ASTRA's ``cone_vec``. The centre of
   pixel (r, c) is ``d + (c − (ncol − 1)/2)·u + (r − (nrow − 1)/2)·v``, where ``u`` and ``v`` are
-  one pixel long and ``d`` is the detector centre (moved by ``detector_offset``).
+  one pixel long and ``d`` is the detector centre (moved by ``detector_offset``). A cone beam's
+  ``source_offset`` moves the source alike, along ``u`` and ``v`` in its own plane, the detector
+  staying where it is (RTK's ``SourceOffsetX/Y``).
 * Vector form (:class:`VectorGeometry`): one row of 12 numbers per view, ``(s, d, u, v)`` for a
   cone beam (source point) and ``(r, d, u, v)`` for a parallel beam (ray direction), exactly as
   ASTRA's ``cone_vec`` / ``parallel3d_vec``. Any scanner, tilted or misaligned, is a vector
@@ -34,7 +36,7 @@ degrees as in every config:
 * scan geometries: ``beam`` (``"cone"``, the default, or ``"parallel"``), ``detector_shape``
   ``[rows, cols]`` (or one number), ``pixel_size`` ``[row, col]`` mm (or one), optional
   ``detector_offset`` ``[row, col]`` mm; cone beams add ``source_to_origin`` and
-  ``source_to_detector``. Views: ``angles_deg`` (a list), or ``num_views`` (default 1) equally
+  ``source_to_detector``, and optionally ``source_offset`` ``[row, col]`` mm. Views: ``angles_deg`` (a list), or ``num_views`` (default 1) equally
   spaced over ``arc_deg`` (default 360) from ``start_angle_deg`` (default 0), end point excluded.
 * vector geometries: ``beam``, ``detector_shape`` and ``vectors`` (one row of 12 numbers a view).
 * volumes: ``shape`` ``[z, y, x]``, ``voxel_size`` (one number or ``[z, y, x]``), optional ``offset``.
@@ -131,10 +133,10 @@ def _turned_detector(angles, pixel_size) -> tuple[np.ndarray, ...]:
     return c, s, np.column_stack([c * pu, s * pu, zero]), np.column_stack([zero, zero, np.full_like(c, pv)])
 
 
-def _offset(det: np.ndarray, u: np.ndarray, v: np.ndarray, pixel_size, detector_offset) -> np.ndarray:
-    """Detector centres moved by ``detector_offset`` (row, col mm) along ``v`` and ``u``."""
-    (pv, pu), (ov, ou) = pixel_size, detector_offset
-    return det + ou * u / pu + ov * v / pv
+def _offset(points: np.ndarray, u: np.ndarray, v: np.ndarray, pixel_size, offset) -> np.ndarray:
+    """Detector centres or sources moved by ``offset`` (row, col mm) along ``v`` and ``u``."""
+    (pv, pu), (ov, ou) = pixel_size, offset
+    return points + ou * u / pu + ov * v / pv
 
 
 class _ScanGeometry:
@@ -201,8 +203,10 @@ class _ScanGeometry:
 class ConeBeamGeometry(_ScanGeometry):
     """Circular cone-beam scan (point source, flat detector).
 
-    ``pixel_size`` and ``detector_offset`` are ``(row, col)`` pairs in mm (a single number means
-    square pixels); the offset moves the detector centre along ``v`` (rows) and ``u`` (columns).
+    ``pixel_size``, ``detector_offset`` and ``source_offset`` are ``(row, col)`` pairs in mm (a
+    single number means square pixels); the detector offset moves the detector centre along ``v``
+    (rows) and ``u`` (columns), the source offset the source along the same directions, in the plane
+    ``source_to_detector`` away from the detector's (as RTK's ``SourceOffsetY/X``).
     """
 
     source_to_origin: float
@@ -211,6 +215,7 @@ class ConeBeamGeometry(_ScanGeometry):
     pixel_size: tuple[float, float]
     angles: tuple[float, ...]
     detector_offset: tuple[float, float] = (0.0, 0.0)
+    source_offset: tuple[float, float] = (0.0, 0.0)
 
     def __post_init__(self):
         sod = finite("source_to_origin", self.source_to_origin, positive=True)
@@ -223,6 +228,7 @@ class ConeBeamGeometry(_ScanGeometry):
         set_field(self, "source_to_origin", sod)
         set_field(self, "source_to_detector", sdd)
         self._check_circular_fields()
+        set_field(self, "source_offset", pair("source_offset", self.source_offset, positive=False))
 
     @property
     def beam(self) -> str:
@@ -256,7 +262,8 @@ class ConeBeamGeometry(_ScanGeometry):
     @cached_property
     def _vectors(self) -> "VectorGeometry":
         c, s, u, v = _turned_detector(self.angles, self.pixel_size)
-        src = np.column_stack([s * self.source_to_origin, -c * self.source_to_origin, np.zeros_like(c)])
+        src = _offset(np.column_stack([s * self.source_to_origin, -c * self.source_to_origin, np.zeros_like(c)]),
+                      u, v, self.pixel_size, self.source_offset)
         gap = self.source_to_detector - self.source_to_origin
         det = _offset(np.column_stack([-s * gap, c * gap, np.zeros_like(c)]), u, v, self.pixel_size, self.detector_offset)
         return VectorGeometry("cone", self.detector_shape, np.hstack([src, det, u, v]))
@@ -397,13 +404,15 @@ def geometry_from_dict(d: dict, where: str = "geometry"):
         source_to_origin=fields.number(fields.required(d, "source_to_origin", where), "source_to_origin", where, positive=True),
         source_to_detector=fields.number(fields.required(d, "source_to_detector", where), "source_to_detector", where,
                                          positive=True),
+        source_offset=fields.one_or_pair(d.get("source_offset", 0.0), "source_offset", where, "a number or [row, col] in mm"),
         **common,
     )
 
 
 _ANGLE_KEYS = {"angles_deg", "num_views", "start_angle_deg", "arc_deg"}
 _CIRCULAR_KEYS = {"beam", "detector_shape", "pixel_size", "detector_offset", *_ANGLE_KEYS}
-_SCAN_KEYS = {"parallel": _CIRCULAR_KEYS, "cone": {*_CIRCULAR_KEYS, "source_to_origin", "source_to_detector"}}
+_SCAN_KEYS = {"parallel": _CIRCULAR_KEYS,
+              "cone": {*_CIRCULAR_KEYS, "source_to_origin", "source_to_detector", "source_offset"}}
 
 
 def _angles_from_dict(d: dict, where: str) -> tuple[float, ...]:

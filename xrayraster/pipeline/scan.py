@@ -28,6 +28,7 @@ from ..gl.voxelize import LabelVolume, voxelize
 from ..physics.detector import Detector
 from ..physics.starvation import refuse_if_starved, starved_share, warn_if_starved
 from ..recon.fdk import FDKStream, Volume
+from ..recon.fdk_weights import footprint_radius
 from ..recon.opencl import CLContext
 from ..simulate.renderer import Renderer
 from ..weave.yarn import LABELS as WEAVE_LABELS
@@ -128,13 +129,16 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False, a
     overlap = "resolve" if loaded.weave is not None else "auto"
     with Renderer(loaded.geometry, overlap=overlap, context=gl, threads=threads) as renderer, \
             (nullcontext(cl) if cl is not None else CLContext()) as cl:
+        scanned = loaded.with_mount(scene)
         with _timed(seconds, "fdk"):
+            # Nothing outside the sample and its mount attenuates: the displaced-detector weights
+            # weigh that reach (recon/fdk_weights.py), not the grid's.
             stream = FDKStream(loaded.geometry, loaded.volume, filter=options.filter, truncation=options.truncation,
                                truncation_width=options.truncation_width, context=cl, batch_views=BATCH_VIEWS,
-                               threads=threads)
+                               threads=threads, object_radius_mm=footprint_radius(*scanned.bounds))
         with stream:
-            provenances, stacks = _project_into(stream, renderer, scene, loaded, seconds, progress, keep_projections,
-                                                allow_starved)
+            provenances, stacks = _project_into(stream, renderer, scanned, loaded, seconds, progress,
+                                                keep_projections, allow_starved)
             with _timed(seconds, "fdk"):
                 volume = stream.result()
         with _timed(seconds, "labels"):
@@ -182,14 +186,13 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False, a
     return ScanResult(volume, labels, metadata, projections)
 
 
-def _project_into(stream: FDKStream, renderer: Renderer, scene, loaded: ScanFile, seconds: dict, progress,
+def _project_into(stream: FDKStream, renderer: Renderer, scanned, loaded: ScanFile, seconds: dict, progress,
                   keep: bool, allow_starved: bool) -> tuple[list[dict], list[np.ndarray]]:
-    """Render the views of the sample and its mount batch by batch into ``stream``, timing the two
+    """Render the views of ``scanned`` (the sample and its mount) batch by batch into ``stream``, timing the two
     stages apart; noisy views interpolate their spectral sums (``Renderer.project``). A batch that
     leaves the views so far starved over the refusal share stops the scan before its backprojection
     unless ``allow_starved``. Returns the batches' provenance and, if ``keep``, their line integrals
     (else they are dropped at once)."""
-    scanned = loaded.with_mount(scene)
     total = loaded.geometry.num_views
     report, bar = _progress(progress, total)
     provenances, stacks = [], []

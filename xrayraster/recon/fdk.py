@@ -23,7 +23,8 @@ __all__ = ["FDKStream", "ReconstructionError", "Volume", "fdk"]
 
 
 def fdk(projections, geometry=None, volume: VolumeGeometry | None = None, *, filter: str = "ram-lak",
-        cutoff: float = 1.0, scan: str = "auto", displaced="auto", truncation="auto",
+        cutoff: float = 1.0, scan: str = "auto", displaced="auto", object_radius_mm: float | None = None,
+        truncation="auto",
         truncation_width: float = DEFAULT_WIDTH, input: str | None = None, context: CLContext | None = None,
         device: str | None = None, memory_limit: int | None = None) -> Volume:
     """Reconstruct ``volume`` from ``projections`` (views, rows, cols) taken with ``geometry``.
@@ -37,7 +38,9 @@ def fdk(projections, geometry=None, volume: VolumeGeometry | None = None, *, fil
       as a fraction of the Nyquist frequency (:mod:`xrayraster.recon.ramp_filter`).
     * ``scan``: ``auto``, ``full`` or ``short`` (Parker weights), see :mod:`xrayraster.recon.fdk_weights`.
     * ``displaced``: full scans only: ``auto`` (chosen from the detector's coverage of the axis and
-      logged), ``True`` (Wang's displaced-detector weights) or ``False`` (every line weighted ½).
+      the object's reach, and logged), ``True`` (Wang's displaced-detector weights) or ``False``
+      (every line weighted ½). ``object_radius_mm``: the radius about the rotation axis outside which
+      nothing attenuates (default: the grid's farthest corner), see :mod:`xrayraster.recon.fdk_weights`.
     * ``truncation``: rows cut off where the object still attenuates (an object wider than the
       field of view) are extrapolated past the detector's edges before filtering: ``auto`` (the
       row ends with signal at the edge), ``True`` (every row end) or ``False``; over
@@ -52,8 +55,8 @@ def fdk(projections, geometry=None, volume: VolumeGeometry | None = None, *, fil
     """
     projections, geometry, input = _unpack(projections, geometry, input)
     check_shape(projections, geometry)
-    with FDKStream(geometry, volume, filter=filter, cutoff=cutoff, scan=scan, displaced=displaced, truncation=truncation,
-                   truncation_width=truncation_width, context=context, device=device,
+    with FDKStream(geometry, volume, filter=filter, cutoff=cutoff, scan=scan, displaced=displaced,
+                   object_radius_mm=object_radius_mm, truncation=truncation, truncation_width=truncation_width, context=context, device=device,
                    memory_limit=memory_limit) as stream:
         stream.add(0, projections, input)
         out = stream.result()

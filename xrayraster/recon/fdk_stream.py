@@ -112,15 +112,15 @@ class FDKStream:
     """
 
     def __init__(self, geometry, volume: VolumeGeometry, *, filter: str = "ram-lak", cutoff: float = 1.0,
-                 scan: str = "auto", displaced="auto", truncation="auto", truncation_width: float = DEFAULT_WIDTH,
-                 context: CLContext | None = None, device: str | None = None, memory_limit: int | None = None,
-                 batch_views: int = MAX_BATCH_VIEWS, threads: int | None = None):
+                 scan: str = "auto", displaced="auto", object_radius_mm: float | None = None, truncation="auto",
+                 truncation_width: float = DEFAULT_WIDTH, context: CLContext | None = None, device: str | None = None,
+                 memory_limit: int | None = None, batch_views: int = MAX_BATCH_VIEWS, threads: int | None = None):
         if not isinstance(volume, VolumeGeometry):
             raise ReconstructionError(
                 f"volume must be a VolumeGeometry (the grid to reconstruct), got {type(volume).__name__}")
         self.geometry, self.volume = geometry, volume
         self.vector_geometry = vec = as_vector_geometry(geometry)
-        self.views = fdk_views(vec, volume, scan, displaced)
+        self.views = fdk_views(vec, volume, scan, displaced, object_radius_mm)
         check_truncation(truncation, truncation_width)
         self._window = (filter, cutoff)
         self._truncation = truncation
@@ -294,7 +294,7 @@ class FDKStream:
         pad = self._pad if self._extended else 0
         if self._host_filter:
             views = self.views
-            host = filter_rows_host(raw, views.vectors[batch.start : batch.stop], views.depth[batch.start : batch.stop],
+            host = filter_rows_host(raw, views.vectors[batch.start : batch.stop], views.toward_axis[batch.start : batch.stop],
                                     views.redundancy[batch.start : batch.stop], ends, self._response_host, views.lead,
                                     views.filtered_cols, pad, views.beam == "cone", "COLUMN_MAJOR" in self._layout,
                                     self._threads)
@@ -431,12 +431,11 @@ def _size(nbytes: int) -> str:
 
 
 def _view_geometry(views: FDKViews) -> np.ndarray:
-    """(views, 4, 4) float32 per view: s.xyz D, d.xyz 0, u.xyz 0, v.xyz 0 (for cosine weights)."""
+    """(views, 5, 4) float32 per view: s, d, u, v and ŝ (toward the axis), each xyz 0 (for cosine weights)."""
     a = views.vectors
-    s, d, u, v = a[:, 0:3], a[:, 3:6], a[:, 6:9], a[:, 9:12]
-    geo = np.zeros((len(a), 4, 4), np.float32)
-    geo[:, 0, :3], geo[:, 0, 3] = s, views.depth
-    geo[:, 1, :3], geo[:, 2, :3], geo[:, 3, :3] = d, u, v
+    geo = np.zeros((len(a), 5, 4), np.float32)
+    geo[:, :4, :3] = a.reshape(-1, 4, 3)
+    geo[:, 4, :3] = views.toward_axis
     return geo
 
 

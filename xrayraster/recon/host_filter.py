@@ -20,15 +20,15 @@ from .truncation import LEFT, RIGHT
 CHUNK_BYTES = 64 << 20  # padded rows filtered per FFT call, at most: bounds the scratch memory
 
 
-def filter_rows_host(lineint: np.ndarray, vectors: np.ndarray, depth: np.ndarray, redundancy: np.ndarray,
+def filter_rows_host(lineint: np.ndarray, vectors: np.ndarray, toward_axis: np.ndarray, redundancy: np.ndarray,
                      ends: np.ndarray, response: np.ndarray, lead: int, out_cols: int, pad: int, cone: bool,
                      column_major: bool, workers: int | None = None) -> np.ndarray:
     """Filtered views of one batch, float32: ``(views, out_cols + 2, rows + 2)`` with ``column_major``,
     else ``(views, rows + 2, out_cols + 2)``, with a one-pixel ring of zeros as the backprojection reads them.
 
-    ``lineint`` (views, rows, cols) line integrals; ``vectors`` (views, 12) and ``depth`` (views,):
-    source, detector centre and pixel steps (mm) and the source-to-detector-plane distance of each
-    view (:class:`~xrayraster.recon.fdk_weights.FDKViews`); ``redundancy`` (views, cols);
+    ``lineint`` (views, rows, cols) line integrals; ``vectors`` (views, 12) and ``toward_axis``
+    (views, 3): source, detector centre and pixel steps (mm) and the unit vector from the source
+    towards the axis of each view (:class:`~xrayraster.recon.fdk_weights.FDKViews`); ``redundancy`` (views, cols);
     ``ends`` (views, rows) the row ends to extrapolate (:func:`~xrayraster.recon.truncation.truncated_row_ends`)
     over ``pad`` columns; ``response`` the ramp's real, even frequency response (its length n is the
     padded row's); pixel column c sits at index ``(c + lead) mod n`` of the padded row, and the output
@@ -42,7 +42,7 @@ def filter_rows_host(lineint: np.ndarray, vectors: np.ndarray, depth: np.ndarray
     step = max(1, CHUNK_BYTES // (rows * n * 16))
     for first in range(0, views, step):
         part = slice(first, min(first + step, views))
-        q = lineint[part] * _pre_weights(vectors[part], depth[part], redundancy[part], rows, cols, cone)
+        q = lineint[part] * _pre_weights(vectors[part], toward_axis[part], redundancy[part], rows, cols, cone)
         padded = np.zeros((len(q), rows, n), np.float32)
         padded[..., lead : lead + cols] = q
         if pad:
@@ -57,9 +57,10 @@ def filter_rows_host(lineint: np.ndarray, vectors: np.ndarray, depth: np.ndarray
     return out
 
 
-def _pre_weights(vectors, depth, redundancy, rows: int, cols: int, cone: bool) -> np.ndarray:
-    """(views, rows, cols) float32: redundancy × cosine weight D / |p − s| (1 for parallel beams), p the
-    pixel centre; |p − s|² expanded in the pixel offsets so that no (views, rows, cols, 3) array is made."""
+def _pre_weights(vectors, toward_axis, redundancy, rows: int, cols: int, cone: bool) -> np.ndarray:
+    """(views, rows, cols) float32: redundancy × cosine weight ŝ·(p − s) / |p − s| (1 for parallel
+    beams), p the pixel centre, ŝ ``toward_axis``; ``p − s`` expanded in the pixel offsets so that
+    no (views, rows, cols, 3) array is made."""
     if not cone:
         return np.broadcast_to(redundancy[:, None, :], (len(redundancy), rows, cols)).astype(np.float32)
     s, d, u, v = (vectors[:, 3 * k : 3 * k + 3] for k in range(4))
@@ -67,14 +68,15 @@ def _pre_weights(vectors, depth, redundancy, rows: int, cols: int, cone: bool) -
     c = (np.arange(cols) - 0.5 * (cols - 1))[None, None, :]
     r = (np.arange(rows) - 0.5 * (rows - 1))[None, :, None]
     dot = lambda x, y: np.einsum("ij,ij->i", x, y)[:, None, None]  # noqa: E731 - per view
-    # The terms that vary along one axis only are summed before the (views, rows, cols) array is
+    # The terms that vary along one axis only are summed before the (views, rows, cols) arrays are
     # made, and the cross term is left out where u ⟂ v (every circular scan): a third of the time.
     squared = (dot(a, a) + r * r * dot(v, v) + 2 * r * dot(a, v)) + (c * c * dot(u, u) + 2 * c * dot(a, u))
     uv = dot(u, v)
     if uv.any():
         squared += (2 * r * uv) * c
     np.sqrt(squared, out=squared)
-    np.divide(depth[:, None, None], squared, out=squared)
+    along = (dot(a, toward_axis) + r * dot(v, toward_axis)) + c * dot(u, toward_axis)  # ŝ·(p − s)
+    np.divide(along, squared, out=squared)
     squared *= redundancy[:, None, :]
     return squared.astype(np.float32)
 
