@@ -55,7 +55,9 @@ def pixel_photon_factor(geometry, view: int) -> np.ndarray:
         h = d - s
         along_r = r * r * (v @ v) + 2 * r * (v @ h) + h @ h
         along_c = c * c * (u @ u) + 2 * c * (u @ h)
-        distance2 = along_r + along_c + 2 * (u @ v) * r * c
+        distance2 = along_r + along_c
+        if u @ v:  # 0 for a detector of square-set pixels: a (rows, cols) product and sum saved
+            distance2 += 2 * (u @ v) * r * c
         return (area * abs(float(normal @ h)) * REFERENCE_DISTANCE_MM**2) * distance2**-1.5
     cos = abs(float(s @ normal)) / np.linalg.norm(s)
     return np.full((rows, cols), area * cos)
@@ -205,7 +207,9 @@ def sampled_signal(lengths, mu, photons, efficiency, energies, factor, counting:
         if counting:  # with a table only
             out[rows] = rng.poisson(mean)
             continue
-        chunk = mean + spread * rng.standard_normal(mean.shape)
+        chunk = rng.standard_normal(mean.shape)  # mean + spread·z, in place
+        chunk *= spread
+        chunk += mean
         if few.any():
             chunk[few] = energies @ rng.poisson(detected_few)
         out[rows] = chunk
