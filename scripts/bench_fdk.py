@@ -29,7 +29,7 @@ Usage::
     python -m scripts.bench_fdk --sizes 128 256  # a subset
     python -m scripts.bench_fdk --quick          # 64³ smoke test
 
-After the sizes, the displaced-detector and region-of-interest cases of scripts/bench_fdk_cases.py
+After the sizes, the source-offset, displaced-detector and region-of-interest cases of scripts/bench_fdk_cases.py
 (RTK beside us; ``--no-cases`` skips them, ``--quick`` too).
 
 Writes out/bench_fdk.json and docs/bench_fdk.png (``--quick``: out/bench_fdk_quick.json and .png),
@@ -171,7 +171,7 @@ def main(argv=None) -> int:
     ap.add_argument("--sizes", type=int, nargs="+", choices=sorted(CASES), default=[128, 256, 512])
     ap.add_argument("--no-rtk", action="store_true", help="do not run RTK")
     ap.add_argument("--no-cases", action="store_true",
-                    help="skip the displaced-detector and region-of-interest cases (scripts/bench_fdk_cases.py)")
+                    help="skip the source-offset, displaced-detector and region-of-interest cases (scripts/bench_fdk_cases.py)")
     ap.add_argument("--plot", type=Path, default=None, help="PNG (default docs/bench_fdk.png; --quick: out/bench_fdk_quick.png)")
     args = common.outputs(ap.parse_args(argv), "bench_fdk")
     sizes = [64] if args.quick else args.sizes

@@ -20,7 +20,7 @@ For view i with source ``s``, detector centre ``d`` and pixel steps ``u`` (colum
   variables from parallel lines to the source's fan measures the rays' angles from the source's
   line to the axis, not from the detector normal; the normal's cosine reconstructs a centred
   sphere (source 100 mm from the axis, 10 mm to the side) 0.52 % low, this one 0.02 % low, as
-  RTK (which weighs source offsets the same way).
+  RTK's FDK does.
 * Ramp filtering along detector rows with pixel pitch ``|u|`` mm (:mod:`xrayraster.recon.ramp_filter`).
 * Voxel-driven backprojection: a voxel at x projects to the detector through the 3×4 matrix
   ``P`` of :attr:`FDKViews.matrices`: ``(col·w, row·w, w) = P·(i, j, k, 1)`` in voxel indices,

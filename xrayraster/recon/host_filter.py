@@ -75,7 +75,10 @@ def _pre_weights(vectors, toward_axis, redundancy, rows: int, cols: int, cone: b
     if uv.any():
         squared += (2 * r * uv) * c
     np.sqrt(squared, out=squared)
-    along = (dot(a, toward_axis) + r * dot(v, toward_axis)) + c * dot(u, toward_axis)  # ŝ·(p − s)
+    along = dot(a, toward_axis) + r * dot(v, toward_axis)  # ŝ·(p − s), its part along the rows
+    across = dot(u, toward_axis)
+    if across.any():  # 0 unless the source is offset sideways (or the detector turned): no third full array
+        along = along + c * across
     np.divide(along, squared, out=squared)
     squared *= redundancy[:, None, :]
     return squared.astype(np.float32)
