@@ -39,7 +39,6 @@ void main() {
         for (int k = 0; k < 6; ++k) large_corners[6u * slot + uint(k)] = corners[k];
         return;
     }
-    // One flat loop, the pixel stepped along the box's rows: cheaper than two nested loops.
     // The box's pixels row by row, two to an entry, in one flat loop (cheaper than two nested).
     uint count = uint(n.x * n.y);
     uint entries = (count + 1u) / 2u;

@@ -36,8 +36,9 @@ degrees as in every config:
 * scan geometries: ``beam`` (``"cone"``, the default, or ``"parallel"``), ``detector_shape``
   ``[rows, cols]`` (or one number), ``pixel_size`` ``[row, col]`` mm (or one), optional
   ``detector_offset`` ``[row, col]`` mm; cone beams add ``source_to_origin`` and
-  ``source_to_detector``, and optionally ``source_offset`` ``[row, col]`` mm. Views: ``angles_deg`` (a list), or ``num_views`` (default 1) equally
-  spaced over ``arc_deg`` (default 360) from ``start_angle_deg`` (default 0), end point excluded.
+  ``source_to_detector``, and optionally ``source_offset`` ``[row, col]`` mm. Views: ``angles_deg``
+  (a list), or ``num_views`` (default 1) equally spaced over ``arc_deg`` (default 360) from
+  ``start_angle_deg`` (default 0), end point excluded.
 * vector geometries: ``beam``, ``detector_shape`` and ``vectors`` (one row of 12 numbers a view).
 * volumes: ``shape`` ``[z, y, x]``, ``voxel_size`` (one number or ``[z, y, x]``), optional ``offset``.
 

@@ -264,15 +264,18 @@ class CrossingEngine:
         """Room for ``found`` candidate entries and a quarter more (kept for the later views)."""
         capacity = int(found * 1.25) + 1024
         size = CANDIDATES_HEADER + ENTRY_BYTES * capacity
+        self._refuse_unless_room(size, f"the scene's triangles cover up to {2 * found} pixel centres in one view",
+                                 2 * found, "listing them")
+        self._candidate_capacity = capacity
+
+    def _refuse_unless_room(self, size: int, what: str, count: int, doing: str, fix: str = "") -> None:
+        """RenderError naming ``what`` (``count`` of them in a view) unless ``size`` bytes fit in half
+        the free memory: a view's lists grow with the scene, and the other half stays for the rest."""
         free = available_memory()
         if free is not None and size > free // 2:
             rows, cols = self.shape
-            raise RenderError(
-                f"the scene's triangles cover up to {2 * found} pixel centres in one view "
-                f"({2 * found / (rows * cols):.0f} per pixel); listing them needs {size / 2**30:.1f} GiB. "
-                "Reduce the detector size or supersampling"
-            )
-        self._candidate_capacity = capacity
+            raise RenderError(f"{what} ({count / (rows * cols):.0f} per pixel); {doing} needs {size / 2**30:.1f} GiB. "
+                              f"Reduce the detector size or supersampling{fix}")
 
     # -- single pass: signed distances summed per pixel ------------------------------------------
 
@@ -345,16 +348,11 @@ class CrossingEngine:
     def _grow_node_pool(self, per_stripe: int, crossings: int = 0) -> None:
         """Room for ``per_stripe`` nodes in every stripe, with a quarter to spare (``crossings``: the
         view's total, for the message when that cannot fit in memory)."""
-        rows, cols = self.shape
         capacity = int(per_stripe * 1.25) + 64
         size = (capacity << NODE_STRIPE_BITS) * NODE_BYTES
-        free = available_memory()
-        if free is not None and size > free // 2:
-            raise RenderError(
-                f"the scene has {crossings} ray-surface crossings in one view ({crossings / (rows * cols):.0f} per pixel); "
-                f"storing them needs {size / 2**30:.1f} GiB. Reduce the detector size or supersampling, "
-                "or render without overlap resolution (overlap='sum') if the objects do not really overlap"
-            )
+        self._refuse_unless_room(size, f"the scene has {crossings} ray-surface crossings in one view",
+                                 crossings, "storing them", " or render without overlap resolution (overlap='sum') "
+                                 "if the objects do not really overlap")
         self.scratch("nodes", size)
         self._stripe_capacity = capacity
         self._empty_lists()  # a list cut short by the overflow is in the heads buffer

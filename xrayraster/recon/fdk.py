@@ -56,8 +56,8 @@ def fdk(projections, geometry=None, volume: VolumeGeometry | None = None, *, fil
     projections, geometry, input = _unpack(projections, geometry, input)
     check_shape(projections, geometry)
     with FDKStream(geometry, volume, filter=filter, cutoff=cutoff, scan=scan, displaced=displaced,
-                   object_radius_mm=object_radius_mm, truncation=truncation, truncation_width=truncation_width, context=context, device=device,
-                   memory_limit=memory_limit) as stream:
+                   object_radius_mm=object_radius_mm, truncation=truncation, truncation_width=truncation_width,
+                   context=context, device=device, memory_limit=memory_limit) as stream:
         stream.add(0, projections, input)
         out = stream.result()
     return Volume(out.data, volume, provenance={**out.provenance, "input": input})

@@ -71,6 +71,7 @@ import numpy as np
 from ..core.choices import SCAN_KINDS, check_choice, is_switch
 from ..core.errors import GeometryError
 from ..core.geometry import as_vector_geometry
+from ..core.validate import finite
 from ..core.volume import VolumeGeometry
 
 log = logging.getLogger(__name__)
@@ -126,10 +127,8 @@ def fdk_views(geometry, volume: VolumeGeometry, scan: str = "auto", displaced="a
     vec = as_vector_geometry(geometry)
     if not isinstance(volume, VolumeGeometry):
         raise GeometryError(f"volume must be a VolumeGeometry, got {type(volume).__name__}")
-    reach = grid_radius(volume) if object_radius_mm is None else object_radius_mm
-    if isinstance(reach, bool) or not isinstance(reach, (int, float, np.integer, np.floating)) \
-            or not math.isfinite(reach) or reach <= 0:
-        raise GeometryError(f"object_radius_mm must be a positive number of mm (or None for the grid's), got {reach!r}")
+    reach = grid_radius(volume) if object_radius_mm is None else finite("object_radius_mm", object_radius_mm,
+                                                                        positive=True)
     a = vec.array
     s, d, u, v = a[:, 0:3], a[:, 3:6], a[:, 6:9], a[:, 9:12]
     rows, cols = vec.detector_shape
@@ -152,7 +151,7 @@ def fdk_views(geometry, volume: VolumeGeometry, scan: str = "auto", displaced="a
 
     wang, lead, trail = False, 0, 0
     if full:
-        redundancy, wang = full_scan_weights(t, displaced, float(reach))
+        redundancy, wang = full_scan_weights(t, displaced, reach)
         if wang:
             lead, trail = _virtual_columns(t)
     else:
