@@ -60,3 +60,43 @@ void grown_primitives(vec2 p[3], float margin, out vec2 corners[6]) {
         corners[k] = pushed ? pushed_corner(p, k < 3 ? k : 0, margin, winding)  // 3..5: an empty primitive
                             : edge_aligned_rectangle_corner(p, k, margin);
 }
+
+// Pass 1's candidate pixels: the projected triangle with each edge pushed out by `margin` px, row
+// by row. A pixel centre outside it is farther than the margin from the triangle, so no exact
+// test can accept it (pass 2 grows its triangles by the same margin). Edge i is the half-plane
+// a·x + c ≥ 0; on the row through y it bounds x from below (a.x > 0) or above (a.x < 0) at
+// slope·y + offset, or, parallel to the rows (a.x = 0), holds for the whole row or for none.
+// A triangle thinner than the margin, whose orientation rounding may flip, lies within the
+// margin of either orientation's half-planes, and a degenerate edge (a = 0, c = 0) imposes
+// nothing: the region stays a superset for slivers and needles.
+struct RowSpans { vec3 slope; vec3 offset; vec3 lower; vec3 upper; vec3 flat_a; vec3 flat_c; };
+
+RowSpans row_spans(vec2 p[3], float margin) {
+    vec2 d0 = p[1] - p[0], d2 = p[0] - p[2];
+    float winding = d0.x * d2.y - d0.y * d2.x > 0.0 ? -1.0 : 1.0;  // cross(p1 - p0, p2 - p0) < 0: clockwise
+    RowSpans s;
+    for (int i = 0; i < 3; ++i) {
+        vec2 d = p[(i + 1) % 3] - p[i];
+        vec2 a = winding * vec2(-d.y, d.x);  // inward normal, |a| = |d|
+        float c = margin * length(d) - dot(a, p[i]);
+        float across = a.x == 0.0 ? 0.0 : -1.0 / a.x;
+        s.slope[i] = a.y * across;
+        s.offset[i] = c * across;
+        s.lower[i] = float(a.x > 0.0);
+        s.upper[i] = float(a.x < 0.0);
+        s.flat_a[i] = a.x == 0.0 ? a.y : 0.0;
+        s.flat_c[i] = a.x == 0.0 ? c : 0.0;
+    }
+    return s;
+}
+
+// The columns [x, y] of `columns` (none when x > y) whose pixel centres on the row through
+// `y_centre` lie inside all three half-planes.
+ivec2 row_span(RowSpans s, float y_centre, ivec2 columns) {
+    vec3 bound = s.slope * y_centre + s.offset;
+    vec3 low = mix(vec3(-3.0e38), bound, s.lower), high = mix(vec3(3.0e38), bound, s.upper);
+    if (any(lessThan(s.flat_a * y_centre + s.flat_c, vec3(0.0)))) return ivec2(1, 0);
+    float lo = max(float(columns.x) + 0.5, max(low.x, max(low.y, low.z)));
+    float hi = min(float(columns.y) + 0.5, min(high.x, min(high.y, high.z)));
+    return ivec2(ceil(lo - 0.5), floor(hi - 0.5));
+}

@@ -1,6 +1,6 @@
 #version 430 core
 // Crossing pass 1: one invocation per triangle. It projects the triangle and lists the pixel
-// centres its box holds, two to an entry (candidates.glsl), for pass 1b
+// centres of its box within the margin of it, two to an entry (candidates.glsl), for pass 1b
 // (pathlength_candidates.comp), which tests them exactly. Testing them here, in a loop whose trip
 // count differs from lane to lane, kept most SIMD lanes idle: on llvmpipe the split is 1.4-1.5x
 // faster (BENCHMARKS.md). A triangle whose box holds more than MAX_SMALL_PIXELS pixel centres is
@@ -39,17 +39,30 @@ void main() {
         for (int k = 0; k < 6; ++k) large_corners[6u * slot + uint(k)] = corners[k];
         return;
     }
-    // The box's pixels row by row, two to an entry, in one flat loop (cheaper than two nested).
-    uint count = uint(n.x * n.y);
+    // Only the box's pixel centres within the margin of the projected triangle become candidates:
+    // a superset of those the exact test can accept (the same margin that grows pass 2's
+    // triangles), about 0.4 of the box on a woven sample. Counted row by row first, so the
+    // entries are reserved at once and written two to an entry.
+    RowSpans spans = row_spans(p, m);
+    uint count = 0u;
+    for (int y = first.y; y <= last.y; ++y) {
+        ivec2 span = row_span(spans, float(y) + 0.5, ivec2(first.x, last.x));
+        count += uint(max(span.y - span.x + 1, 0));
+    }
+    if (count == 0u) return;
     uint entries = (count + 1u) / 2u;
     uint base = atomicAdd(candidate_count, entries);
     uint room = base < u_candidate_capacity ? min(entries, u_candidate_capacity - base) : 0u;
-    ivec2 px = first;
-    for (uint k = 0u; k < room; ++k) {
-        uint a = uint(px.x) | (uint(px.y) << 16);
-        if (++px.x > last.x) px = ivec2(first.x, px.y + 1);
-        uint b = 2u * k + 1u < count ? uint(px.x) | (uint(px.y) << 16) : NO_PIXEL;
-        if (++px.x > last.x) px = ivec2(first.x, px.y + 1);
-        candidates[base + k] = uvec4(index, a, b, 0u);
+    uint written = 0u;
+    uint pending = NO_PIXEL;
+    for (int y = first.y; y <= last.y && written < room; ++y) {
+        ivec2 span = row_span(spans, float(y) + 0.5, ivec2(first.x, last.x));
+        for (int x = span.x; x <= span.y && written < room; ++x) {
+            uint pixel = uint(x) | (uint(y) << 16);
+            if (pending == NO_PIXEL) { pending = pixel; continue; }
+            candidates[base + written++] = uvec4(index, pending, pixel, 0u);
+            pending = NO_PIXEL;
+        }
     }
+    if (pending != NO_PIXEL && written < room) candidates[base + written] = uvec4(index, pending, NO_PIXEL, 0u);
 }
