@@ -18,7 +18,7 @@ void main() {
     if (px.x >= u_size.x || px.y >= u_size.y) return;
     int pixel = px.y * u_size.x + px.x;
     int n = load_sorted(pixel);
-    if (n < 0) return;
+    if (n <= 0) return;  // no crossing: the lengths stay as the host cleared them (most pixels of a view)
     for (int c = 0; c < NUM_CHANNELS; c++) acc[c] = 0u;
     // Each span adds its end minus its start in fixed point (fixed_point.glsl, as the sum passes),
     // each crossing's t rounded once, not a float32 running sum.

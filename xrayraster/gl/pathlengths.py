@@ -169,6 +169,7 @@ class PathLengthRenderer:
         rows, cols = self._render_vec.detector_shape
         nch = uploaded.num_channels
         lengths = self.engine.scratch("lengths", 4 * nch * rows * cols)
+        lengths.clear()
         with self.engine.record_lists(uploaded, view, table) as lists:
             lists.resolve("pathlength_resolve.comp", {"NUM_CHANNELS": nch},
                           {"u_size": (cols, rows), "u_fixed_scale": uploaded.fixed_scale}, {"output": lengths})
