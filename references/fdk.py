@@ -188,6 +188,21 @@ class _View:
         gamma = np.arctan2(centre[0] * direction[:, 1] - centre[1] * direction[:, 0], direction @ centre)
         return gamma, t
 
+    def lines(self, row: float, cols, shape):
+        """(t, cos γ) of the horizontal lines through pixels (``row``, ``cols``): signed distance from
+        the axis (growing with the column) and the fan angle's cosine (1 for parallel beams)."""
+        p = self.pixel_centres(np.full(len(cols), float(row)), np.asarray(cols, float), shape)[:, :2]
+        direction = (p - self.s[:2]) if self.cone else np.broadcast_to(self.s[:2], p.shape)
+        direction = direction / np.linalg.norm(direction, axis=-1, keepdims=True)
+        t = p[:, 0] * direction[:, 1] - p[:, 1] * direction[:, 0]
+        ends = self.pixel_centres(np.full(2, float(row)), np.array([0.0, shape[1] - 1.0]), shape)[:, :2]
+        ends_dir = (ends - self.s[:2]) if self.cone else np.broadcast_to(self.s[:2], ends.shape)
+        ends_t = (ends[:, 0] * ends_dir[:, 1] - ends[:, 1] * ends_dir[:, 0]) / np.linalg.norm(ends_dir, axis=-1)
+        t = t if ends_t[1] >= ends_t[0] else -t
+        if not self.cone:
+            return t, np.ones(len(t))
+        return t, direction @ (-self.s[:2] / np.linalg.norm(self.s[:2]))
+
     def detector_coordinates(self, x: np.ndarray, shape):
         """(row, col, w) where voxel centres ``x`` (…, 3) project onto the detector: pixel indices
         (fractional) and the voxel's relative depth."""
@@ -336,20 +351,52 @@ def truncated_ends(p: np.ndarray, redundancy: np.ndarray, truncation) -> np.ndar
     return edges > limit
 
 
-def extrapolated(row: np.ndarray, pad: int, left: bool, right: bool) -> np.ndarray:
-    """``row`` (weighted) with ``pad`` columns added on each side: past a truncated edge the point
-    mirror about the edge pixel, ``2·q(edge) − q(mirror)`` clamped at 0, times the roll-off
-    ``cos²(π/2·j/(pad + 1))`` at j columns past the edge (Ohnesorge et al. 2000); else zeros."""
+def extrapolated(row: np.ndarray, pad: int, left: bool, right: bool, view=None, shape=None, r: int = 0,
+                 widths=(None, None)) -> np.ndarray:
+    """``row`` (weighted) with ``pad`` columns added on each side; past a truncated edge, either the
+    arc: (q/cos γ)² fitted by a parabola in the lines' axis distance t over the 12 outermost pixels
+    (numpy.polyfit) and followed until it closes, when it closes within ``pad``; or the point mirror
+    about the edge pixel, ``2·q(edge) − q(mirror)`` clamped at 0, times ``cos²(π/2·j/(W + 1))``
+    for j ≤ W columns past the edge (Ohnesorge et al. 2000), W the side's entry of ``widths``
+    (None: ``pad``). Zeros past an edge that is not truncated."""
     cols = len(row)
+    k = min(12, cols)
     j = np.arange(1, pad + 1)
-    roll = np.cos(0.5 * math.pi * j / (pad + 1)) ** 2
-    before = roll * np.maximum(0.0, 2 * row[0] - row[np.minimum(j, cols - 1)]) if left else np.zeros(pad)
-    after = roll * np.maximum(0.0, 2 * row[-1] - row[np.maximum(cols - 1 - j, 0)]) if right else np.zeros(pad)
+
+    def past(inner, outer, mirrored, width):
+        t_in, cos_in = view.lines(r, inner, shape)
+        t_out, cos_out = view.lines(r, outer, shape)
+        value = np.polyval(np.polyfit(t_in, (row[inner] / cos_in) ** 2, 2), t_out) if k >= 3 else np.ones(pad)
+        closed = np.nonzero(value <= 0)[0]
+        if len(closed):
+            arc = cos_out * np.sqrt(np.maximum(value, 0.0))
+            arc[closed[0]:] = 0.0
+            return arc
+        width = pad if width is None else width
+        roll = np.where(j <= width, np.cos(0.5 * math.pi * j / (width + 1)) ** 2, 0.0)
+        return roll * np.maximum(0.0, 2 * row[inner[0]] - row[mirrored])
+
+    before = past(np.arange(k), -j, np.minimum(j, cols - 1), widths[0]) if left else np.zeros(pad)
+    after = (past(cols - 1 - np.arange(k), cols - 1 + j, np.maximum(cols - 1 - j, 0), widths[1]) if right
+             else np.zeros(pad))
     return np.concatenate([before[::-1], row, after])
 
 
+def reach_widths(view, shape, reach_mm: float, most: int) -> tuple[int, tuple[float, float]]:
+    """The lines through the detector's centre past each edge: the last column (of 1 … ``most``)
+    whose line passes within ``reach_mm`` of the axis, and the mirror widths, the reach past the
+    left and right edge over the edge's column spacing of t."""
+    cols, middle = shape[1], (shape[0] - 1) / 2
+    tangent = []
+    for outer in (-np.arange(1, most + 1), cols - 1 + np.arange(1, most + 1)):
+        beyond = np.nonzero(np.abs(view.lines(middle, outer, shape)[0]) >= reach_mm)[0]
+        tangent.append(int(beyond[0]) if len(beyond) else most)
+    t = np.abs(view.lines(middle, [0, 1, cols - 2, cols - 1], shape)[0])
+    return max(tangent), ((reach_mm - t[0]) / abs(t[0] - t[1]), (reach_mm - t[3]) / abs(t[3] - t[2]))
+
+
 def filtered_projections(projections, geometry, window="ram-lak", cutoff=1.0, scan="auto", displaced="auto",
-                         truncation="auto", truncation_width=0.5, reach_mm: float = math.inf):
+                         truncation="auto", truncation_width=0.5, reach_mm: float = math.inf, known_reach=None):
     """(views, rows, before + cols + after) cosine- and redundancy-weighted, ramp-filtered
     projections (float64) on the virtual detector of :func:`virtual_detector`, the per-view
     objects, their angular cells and ``before``. With truncated rows (:func:`truncated_ends`), each
@@ -364,11 +411,18 @@ def filtered_projections(projections, geometry, window="ram-lak", cutoff=1.0, sc
     before, after = virtual_detector(views, shape, full and not np.all(redundancy == 0.5))
     p = np.asarray(projections, dtype=np.float64)
     ends = truncated_ends(p, redundancy, truncation)
-    pad = max(1, round(truncation_width * shape[1])) if ends.any() else 0
+    widths = [(None, None)] * len(views)
+    if known_reach is None:
+        pad = max(1, round(truncation_width * shape[1])) if ends.any() else 0
+    else:  # as far as the object reaches past an edge in any view, each side's mirror over its own reach
+        reaches = [reach_widths(view, shape, known_reach, 4 * shape[1]) for view in views]
+        pad = min(4 * shape[1], math.ceil(1.1 * max(r[0] for r in reaches)) + 2) if ends.any() else 0
+        widths = [tuple(int(np.clip(round(w), 1, max(pad, 1))) for w in r[1]) for r in reaches]
     out = np.empty((p.shape[0], p.shape[1], before + p.shape[2] + after))
     for i, view in enumerate(views):
         weighted = p[i] * view.cosine(shape) * redundancy[i][None, :]
-        rows = np.array([extrapolated(row, pad, *ends[i, k]) for k, row in enumerate(weighted)])
+        rows = np.array([extrapolated(row, pad, *ends[i, k], view, shape, k, widths[i])
+                         for k, row in enumerate(weighted)])
         rows = np.pad(rows, ((0, 0), (max(0, before - pad), max(0, after - pad))))
         first = max(0, pad - before)  # the column of the virtual detector's first column
         out[i] = ramp_filter_rows(rows, pitch, window, cutoff)[:, first : first + out.shape[2]]
@@ -407,7 +461,7 @@ def fdk_reference(projections, geometry, volume, window="ram-lak", cutoff=1.0, s
     if reach is None:  # the grid's farthest voxel corner: the outermost centres' x and y plus half a voxel
         reach = float(np.hypot(*(np.abs(x[0, :, :, :2]).max(axis=(0, 1)) + np.array(volume.voxel_size[:0:-1]) / 2)))
     filtered, views, cells, before = filtered_projections(projections, geometry, window, cutoff, scan, displaced,
-                                                          truncation, truncation_width, reach)
+                                                          truncation, truncation_width, reach, object_radius_mm)
     shape = np.shape(projections)[1:]
     out = np.zeros(volume.shape)
     for q, view, cell in zip(filtered, views, cells):

@@ -30,28 +30,22 @@ inline float pre_weight(__global const float4* geo, __global const float* redund
 }
 
 // Pre-weighted value of a row at column c (−pad ≤ c < cols + pad): the detector's pixel, or past an
-// edge flagged in `ends` its point mirror about the edge pixel rolled off to 0 over pad columns
-// (xrayraster/recon/truncation.py: Ohnesorge et al. 2000), else 0.
+// edge the host's extrapolation of it (xrayraster/recon/truncation.py: zeros where the row end is
+// not extrapolated), else 0.
 inline float row_value(__global const float* in, __global const float4* geo, __global const float* redundancy,
-                       int view, int row, int c, int rows, int cols, int cone, int ends, int pad) {
+                       __global const float* extension, int view, int row, int c, int rows, int cols, int cone,
+                       int pad) {
     if (c >= 0 && c < cols) return in[c] * pre_weight(geo, redundancy, view, row, c, rows, cols, cone);
-    const int left = c < 0;
-    if (!(ends & (left ? 1 : 2))) return 0.0f;
-    const int j = left ? -c : c - cols + 1;  // columns past the edge
+    const int j = c < 0 ? -c : c - cols + 1;  // columns past the edge
     if (j > pad) return 0.0f;
-    const int edge = left ? 0 : cols - 1;
-    const int mirror = left ? min(j, cols - 1) : max(cols - 1 - j, 0);
-    const float q0 = in[edge] * pre_weight(geo, redundancy, view, row, edge, rows, cols, cone);
-    const float qm = in[mirror] * pre_weight(geo, redundancy, view, row, mirror, rows, cols, cone);
-    const float roll = cospi(0.5f * j / (pad + 1));
-    return roll * roll * fmax(0.0f, 2.0f * q0 - qm);
+    return extension[(((size_t)view * rows + row) * 2 + (c < 0 ? 0 : 1)) * pad + j - 1];
 }
 
 __kernel void filter_rows(__global const float* projections,  // (views, rows, cols) line integrals
                           __global float* filtered,           // (views, rows + 2, out_cols + 2) or COLUMN_MAJOR; ring kept zero
                           __global const float* redundancy,   // (views, cols)
                           __global const float4* geo,         // (views, 4) see pre_weight
-                          __global const uchar* ends,         // (views, rows): 1 extrapolate before column 0, 2 after the last
+                          __global const float* extension,    // (views, rows, 2, pad): past column 0, past the last
                           __global const float* response,     // (n) bit-reversed, 1/n included
                           __global const float2* twiddle,     // (n/2) exp(−2πik/n)
                           BUF float2* scratch,                // n per work-group (local) or per pair (global)
@@ -71,13 +65,12 @@ __kernel void filter_rows(__global const float* projections,  // (views, rows, c
     BUF float2* buf = scratch;
 #endif
     __global const float* in0 = projections + ((size_t)view * rows + r0) * cols;
-    const int ends0 = ends[view * rows + r0], ends1 = r1 < rows ? ends[view * rows + r1] : 0;
     for (int k = lid; k < n; k += lsize) {
         int c = k - lead;
         if (c >= n - lead - pad) c -= n;
         float2 x;
-        x.x = row_value(in0, geo, redundancy, view, r0, c, rows, cols, cone, ends0, pad);
-        x.y = r1 < rows ? row_value(in0 + cols, geo, redundancy, view, r1, c, rows, cols, cone, ends1, pad) : 0.0f;
+        x.x = row_value(in0, geo, redundancy, extension, view, r0, c, rows, cols, cone, pad);
+        x.y = r1 < rows ? row_value(in0 + cols, geo, redundancy, extension, view, r1, c, rows, cols, cone, pad) : 0.0f;
         buf[k] = x;
     }
     barrier(CLK_LOCAL_MEM_FENCE | CLK_GLOBAL_MEM_FENCE);

@@ -58,13 +58,14 @@ def add_parser(subparsers) -> None:
                           "coverage of the axis and the object's reach (default auto; the choice is logged with -v)")
     rec.add_argument("--object-radius", type=float, default=None, metavar="MM",
                      help="the radius about the rotation axis outside which nothing attenuates, which --displaced "
-                          "auto weighs (default: the grid's farthest corner)")
+                          "auto weighs and the truncation correction extrapolates to (default: the grid's farthest "
+                          "corner, and --truncation-width)")
     rec.add_argument("--truncation", choices=tuple(SWITCH), default="auto",
                      help="extrapolate rows cut off by the detector's edges (an object wider than the field of "
                           "view): the rows with signal at an edge (default auto), every row, or none")
     rec.add_argument("--truncation-width", type=float, default=DEFAULT_WIDTH, metavar="SHARE",
-                     help=f"how far the rows are extrapolated on each side, a share of the detector width "
-                          f"(default {DEFAULT_WIDTH})")
+                     help=f"how far the rows are extrapolated on each side without --object-radius, a share of "
+                          f"the detector width (default {DEFAULT_WIDTH})")
     rec.add_argument("--input", choices=RECONSTRUCTION_INPUTS, default=None,
                      help="what the TIFF holds (default: its metadata, written by 'xrayraster render', else lineint)")
     rec.add_argument("--device", default=None, help="OpenCL device: 'P:D' or part of its name (default: the fastest)")

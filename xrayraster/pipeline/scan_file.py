@@ -56,7 +56,9 @@ class ScanOptions:
     voxels of the grid, where ``[weave.sample]`` leaves the mesh resolution open; 0.05 = 1/20),
     ``truncation`` (``"auto"``, true or false: extrapolate rows cut off by the detector's edges, a
     sample wider than the field of view) and ``truncation_width`` (the extrapolation's width on
-    each side, a share of the detector width), as :func:`xrayraster.fdk` takes them."""
+    each side, a share of the detector width, where the object's reach is unknown: a scan knows its
+    sample's, so this applies to ``xrayraster reconstruct`` without ``--object-radius``), as
+    :func:`xrayraster.fdk` takes them."""
 
     seed: int = 0
     noise: bool = True

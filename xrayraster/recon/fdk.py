@@ -40,11 +40,14 @@ def fdk(projections, geometry=None, volume: VolumeGeometry | None = None, *, fil
     * ``displaced``: full scans only: ``auto`` (chosen from the detector's coverage of the axis and
       the object's reach, and logged), ``True`` (Wang's displaced-detector weights) or ``False``
       (every line weighted ½). ``object_radius_mm``: the radius about the rotation axis outside which
-      nothing attenuates (default: the grid's farthest corner), see :mod:`xrayraster.recon.fdk_weights`.
+      nothing attenuates (default: the grid's farthest corner), see :mod:`xrayraster.recon.fdk_weights`;
+      given, it also bounds the truncation correction's extrapolation.
     * ``truncation``: rows cut off where the object still attenuates (an object wider than the
       field of view) are extrapolated past the detector's edges before filtering: ``auto`` (the
-      row ends with signal at the edge), ``True`` (every row end) or ``False``; over
-      ``truncation_width`` × the detector width on each side (:mod:`xrayraster.recon.truncation`).
+      row ends with signal at the edge), ``True`` (every row end) or ``False``: a fitted arc where
+      the row visibly rounds off, else the row's mirror, out to how far an object of
+      ``object_radius_mm`` reaches past the edge, or without it ``truncation_width`` × the
+      detector width on each side (:mod:`xrayraster.recon.truncation`).
       The share of row ends corrected is in the result's provenance.
     * ``context``: a :class:`~xrayraster.recon.opencl.CLContext` to reuse (kernels stay compiled),
       else one is made on ``device`` (or ``XRAYRASTER_CL_DEVICE``, or the fastest device).

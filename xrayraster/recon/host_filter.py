@@ -15,14 +15,14 @@ from __future__ import annotations
 import numpy as np
 import scipy.fft
 
-from .truncation import LEFT, RIGHT
+from .truncation import row_extensions
 
 CHUNK_BYTES = 64 << 20  # padded rows filtered per FFT call, at most: bounds the scratch memory
 
 
 def filter_rows_host(lineint: np.ndarray, vectors: np.ndarray, toward_axis: np.ndarray, redundancy: np.ndarray,
                      ends: np.ndarray, response: np.ndarray, lead: int, out_cols: int, pad: int, cone: bool,
-                     column_major: bool, workers: int | None = None) -> np.ndarray:
+                     column_major: bool, widths: np.ndarray | None = None, workers: int | None = None) -> np.ndarray:
     """Filtered views of one batch, float32: ``(views, out_cols + 2, rows + 2)`` with ``column_major``,
     else ``(views, rows + 2, out_cols + 2)``, with a one-pixel ring of zeros as the backprojection reads them.
 
@@ -30,7 +30,8 @@ def filter_rows_host(lineint: np.ndarray, vectors: np.ndarray, toward_axis: np.n
     (views, 3): source, detector centre and pixel steps (mm) and the unit vector from the source
     towards the axis of each view (:class:`~xrayraster.recon.fdk_weights.FDKViews`); ``redundancy`` (views, cols);
     ``ends`` (views, rows) the row ends to extrapolate (:func:`~xrayraster.recon.truncation.truncated_row_ends`)
-    over ``pad`` columns; ``response`` the ramp's real, even frequency response (its length n is the
+    over up to ``pad`` columns (:func:`~xrayraster.recon.truncation.row_extensions`, mirrors rolled
+    off over ``widths`` (views, 2) columns); ``response`` the ramp's real, even frequency response (its length n is the
     padded row's); pixel column c sits at index ``(c + lead) mod n`` of the padded row, and the output
     keeps indices ``0 … out_cols − 1``. ``workers``: FFT threads (None: every core)."""
     views, rows, cols = lineint.shape
@@ -42,11 +43,14 @@ def filter_rows_host(lineint: np.ndarray, vectors: np.ndarray, toward_axis: np.n
     step = max(1, CHUNK_BYTES // (rows * n * 16))
     for first in range(0, views, step):
         part = slice(first, min(first + step, views))
-        q = lineint[part] * _pre_weights(vectors[part], toward_axis[part], redundancy[part], rows, cols, cone)
+        q = lineint[part] * pre_weights(vectors[part], toward_axis[part], redundancy[part], rows, cols, cone)
         padded = np.zeros((len(q), rows, n), np.float32)
         padded[..., lead : lead + cols] = q
         if pad:
-            _extend(padded, q, ends[part], lead, pad)
+            extension = row_extensions(q, ends[part], vectors[part], toward_axis[part], cone, pad, widths[part])
+            j = np.arange(1, pad + 1)
+            padded[..., (lead - j) % n] = extension[:, :, 0]
+            padded[..., (lead + cols - 1 + j) % n] = extension[:, :, 1]
         spectrum = scipy.fft.rfft(padded, axis=-1, workers=workers)
         spectrum *= half
         filtered = scipy.fft.irfft(spectrum, n=n, axis=-1, workers=workers)[..., :out_cols]
@@ -57,7 +61,7 @@ def filter_rows_host(lineint: np.ndarray, vectors: np.ndarray, toward_axis: np.n
     return out
 
 
-def _pre_weights(vectors, toward_axis, redundancy, rows: int, cols: int, cone: bool) -> np.ndarray:
+def pre_weights(vectors, toward_axis, redundancy, rows: int, cols: int, cone: bool) -> np.ndarray:
     """(views, rows, cols) float32: redundancy × cosine weight ŝ·(p − s) / |p − s| (1 for parallel
     beams), p the pixel centre, ŝ ``toward_axis``; ``p − s`` expanded in the pixel offsets so that
     no (views, rows, cols, 3) array is made."""
@@ -82,17 +86,3 @@ def _pre_weights(vectors, toward_axis, redundancy, rows: int, cols: int, cone: b
     np.divide(along, squared, out=squared)
     squared *= redundancy[:, None, :]
     return squared.astype(np.float32)
-
-
-def _extend(padded: np.ndarray, q: np.ndarray, ends: np.ndarray, lead: int, pad: int) -> None:
-    """Past each flagged row end, the row's point mirror about the edge pixel rolled off to 0 over
-    ``pad`` columns (:mod:`~xrayraster.recon.truncation`), written into ``padded`` in place."""
-    n, cols = padded.shape[-1], q.shape[-1]
-    j = np.arange(1, pad + 1)
-    roll = (np.cos(0.5 * np.pi * j / (pad + 1)) ** 2).astype(np.float32)
-    for flag, edge, mirror, at in ((LEFT, 0, np.minimum(j, cols - 1), lead - j),
-                                   (RIGHT, cols - 1, np.maximum(cols - 1 - j, 0), lead + cols - 1 + j)):
-        flagged = (ends & flag) != 0
-        if flagged.any():
-            extension = roll * np.maximum(0.0, 2.0 * q[..., edge : edge + 1] - q[..., mirror])
-            padded[..., at % n] = np.where(flagged[..., None], extension, 0.0)
