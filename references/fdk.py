@@ -190,15 +190,11 @@ class _View:
 
     def lines(self, row: float, cols, shape):
         """(t, cos γ) of the horizontal lines through pixels (``row``, ``cols``): signed distance from
-        the axis (growing with the column) and the fan angle's cosine (1 for parallel beams)."""
+        the axis and the fan angle's cosine (1 for parallel beams)."""
         p = self.pixel_centres(np.full(len(cols), float(row)), np.asarray(cols, float), shape)[:, :2]
         direction = (p - self.s[:2]) if self.cone else np.broadcast_to(self.s[:2], p.shape)
         direction = direction / np.linalg.norm(direction, axis=-1, keepdims=True)
         t = p[:, 0] * direction[:, 1] - p[:, 1] * direction[:, 0]
-        ends = self.pixel_centres(np.full(2, float(row)), np.array([0.0, shape[1] - 1.0]), shape)[:, :2]
-        ends_dir = (ends - self.s[:2]) if self.cone else np.broadcast_to(self.s[:2], ends.shape)
-        ends_t = (ends[:, 0] * ends_dir[:, 1] - ends[:, 1] * ends_dir[:, 0]) / np.linalg.norm(ends_dir, axis=-1)
-        t = t if ends_t[1] >= ends_t[0] else -t
         if not self.cone:
             return t, np.ones(len(t))
         return t, direction @ (-self.s[:2] / np.linalg.norm(self.s[:2]))
@@ -351,12 +347,12 @@ def truncated_ends(p: np.ndarray, redundancy: np.ndarray, truncation) -> np.ndar
     return edges > limit
 
 
-def extrapolated(row: np.ndarray, pad: int, left: bool, right: bool, view=None, shape=None, r: int = 0,
+def extrapolated(row: np.ndarray, pad: int, left: bool, right: bool, view, shape, r: int,
                  widths=(None, None)) -> np.ndarray:
-    """``row`` (weighted) with ``pad`` columns added on each side; past a truncated edge, either the
-    arc: (q/cos γ)² fitted by a parabola in the lines' axis distance t over the 12 outermost pixels
-    (numpy.polyfit) and followed until it closes, when it closes within ``pad``; or the point mirror
-    about the edge pixel, ``2·q(edge) − q(mirror)`` clamped at 0, times ``cos²(π/2·j/(W + 1))``
+    """``row`` (weighted; row ``r`` of ``view``) with ``pad`` columns added on each side; past a
+    truncated edge, either the arc: (q/cos γ)² fitted by a parabola in the lines' axis distance t
+    over the 12 outermost pixels (numpy.polyfit) and followed until it closes, when it closes
+    within ``pad``; or the point mirror about the edge pixel, ``2·q(edge) − q(mirror)`` clamped at 0, times ``cos²(π/2·j/(W + 1))``
     for j ≤ W columns past the edge (Ohnesorge et al. 2000), W the side's entry of ``widths``
     (None: ``pad``). Zeros past an edge that is not truncated."""
     cols = len(row)

@@ -28,7 +28,7 @@ from ..core.geometry import as_vector_geometry
 from ..core.memory import available_memory
 from ..core.volume import VolumeGeometry
 from .fdk_weights import FDKViews, fdk_views
-from .host_filter import pre_weights, filter_rows_host
+from .host_filter import filter_rows_host, pre_weights
 from .opencl import CLContext
 from .ramp_filter import padded_length, ramp_response
 from .truncation import (DEFAULT_WIDTH, LEFT, MAX_WIDTH, RIGHT, check_truncation, padding_columns, reach_padding,
@@ -317,16 +317,16 @@ class FDKStream:
             return out_dev
         cl.enqueue_fill_buffer(ctx.queue, out_dev, np.float32(0), 0, size + WINDOW_PAD)
         raw_dev = ctx.buffer(raw, "r")
-        ends_dev = ctx.buffer(self._extensions(batch, raw, ends, pad), "r")
+        extension_dev = ctx.buffer(self._extensions(batch, raw, ends, pad), "r")
         red_dev = ctx.buffer(self.views.redundancy[batch.start : batch.stop].astype(np.float32), "r")
         geo_dev = ctx.buffer(self._geo[batch.start : batch.stop], "r")
         scratch = ctx.buffer(count * pairs * n * 8) if self.plan.global_scratch else self._local_scratch
         self._filter_kernel(ctx.queue, (count * pairs * self._local_size,), (self._local_size,), raw_dev, out_dev,
-                            red_dev, geo_dev, ends_dev, self._response, self._twiddle, scratch, np.int32(rows),
+                            red_dev, geo_dev, extension_dev, self._response, self._twiddle, scratch, np.int32(rows),
                             np.int32(cols), np.int32(self.views.lead), np.int32(self.views.filtered_cols),
                             np.int32(pad), np.int32(n),
                             np.int32(self.views.beam == "cone"))
-        for buffer in (raw_dev, red_dev, geo_dev, ends_dev) + ((scratch,) if self.plan.global_scratch else ()):
+        for buffer in (raw_dev, red_dev, geo_dev, extension_dev) + ((scratch,) if self.plan.global_scratch else ()):
             buffer.release()  # after the kernel: OpenCL keeps them alive until it has run
         return out_dev
 

@@ -31,7 +31,7 @@ def filter_rows_host(lineint: np.ndarray, vectors: np.ndarray, toward_axis: np.n
     towards the axis of each view (:class:`~xrayraster.recon.fdk_weights.FDKViews`); ``redundancy`` (views, cols);
     ``ends`` (views, rows) the row ends to extrapolate (:func:`~xrayraster.recon.truncation.truncated_row_ends`)
     over up to ``pad`` columns (:func:`~xrayraster.recon.truncation.row_extensions`, mirrors rolled
-    off over ``widths`` (views, 2) columns); ``response`` the ramp's real, even frequency response (its length n is the
+    off over ``widths`` (views, 2) columns, default ``pad``); ``response`` the ramp's real, even frequency response (its length n is the
     padded row's); pixel column c sits at index ``(c + lead) mod n`` of the padded row, and the output
     keeps indices ``0 … out_cols − 1``. ``workers``: FFT threads (None: every core)."""
     views, rows, cols = lineint.shape
@@ -47,6 +47,7 @@ def filter_rows_host(lineint: np.ndarray, vectors: np.ndarray, toward_axis: np.n
         padded = np.zeros((len(q), rows, n), np.float32)
         padded[..., lead : lead + cols] = q
         if pad:
+            widths = np.full((views, 2), pad) if widths is None else widths
             extension = row_extensions(q, ends[part], vectors[part], toward_axis[part], cone, pad, widths[part])
             j = np.arange(1, pad + 1)
             padded[..., (lead - j) % n] = extension[:, :, 0]
