@@ -187,6 +187,19 @@ def test_truncation_correction_equals_the_reference(cl, monkeypatch, case, trunc
     assert got.provenance["truncation_corrected_row_ends"] > (0.99 if truncation is True else 0.4)
 
 
+@pytest.mark.parametrize("reach", [None, 25.0])
+def test_parallel_beam_truncation_equals_the_reference(cl, reach):
+    """Parallel beams: the arcs fit along each ray's own distance from the axis (no fan angle).
+    An ellipse 1.5× wider than the 16 mm field of view, against references/fdk.py."""
+    g = xr.ParallelBeamGeometry((8, 64), 0.5, xr.full_circle(90))
+    volume = xr.VolumeGeometry((2, 48, 48), 0.5)
+    p = project([Ellipsoid((0.5, 0.0, 0.0), (24.0, 20.0, 1e4), 0.2, MU)], g)
+    want = fdk_reference(p, g, volume, object_radius_mm=reach)
+    got = fdk(p, g, volume, object_radius_mm=reach, context=cl)
+    assert max_rel(got.data / 10, want) <= 1e-4
+    assert got.provenance["truncation_corrected_row_ends"] > 0.4
+
+
 def test_an_object_inside_the_field_of_view_is_not_touched(cl):
     """truncation="auto" on projections whose row ends are in air: no row end corrected, the
     volume the same to the bit as with the correction off (the FFT was not even lengthened)."""
