@@ -8,10 +8,9 @@ Distances are measured from a point beside the scene, not from the source
 that find the candidate pixels and test them:
 
 1. a compute pass over all triangles (``shaders/pathlength_small.comp``) lists, for a triangle
-   whose projected box holds at most ``small_triangle_pixels`` pixel centres, the pixels of that
-   box within a margin of the projected triangle as candidates (two to an entry; row spans of the
-   triangle grown as pass 2 grows it: a superset of the pixels the exact test accepts, 0.4 of the
-   box's on a woven sample), and lists the larger triangles apart;
+   whose projected box holds at most ``small_triangle_pixels`` pixel centres, the box's pixels
+   within the triangle grown as pass 2 grows it (a superset of those the exact test accepts) as
+   candidates, two to an entry, and lists the larger triangles apart;
 1b. a compute pass over the candidates (``shaders/pathlength_candidates.comp``) runs the exact
    test of each, every SIMD lane busy whatever the size of the boxes (measured: 1.4-1.5x faster
    on llvmpipe than testing each box in pass 1, BENCHMARKS.md);

@@ -28,11 +28,10 @@ from ..core.geometry import as_vector_geometry
 from ..core.memory import available_memory
 from ..core.volume import VolumeGeometry
 from .fdk_weights import FDKViews, fdk_views
-from .host_filter import filter_rows_host, pre_weights
+from .host_filter import filter_rows_host, kernel_extensions
 from .opencl import CLContext
 from .ramp_filter import padded_length, ramp_response
-from .truncation import (DEFAULT_WIDTH, LEFT, MAX_WIDTH, RIGHT, check_truncation, padding_columns, reach_padding,
-                         row_extensions, truncated_row_ends)
+from .truncation import DEFAULT_WIDTH, LEFT, RIGHT, check_truncation, padding, truncated_row_ends
 from .volume import MM_TO_CM, Volume
 
 log = logging.getLogger(__name__)
@@ -125,7 +124,7 @@ class FDKStream:
         check_truncation(truncation, truncation_width)
         self._window = (filter, cutoff)
         self._truncation = truncation
-        self._pad, self._widths = self._padding(truncation, truncation_width, object_radius_mm)
+        self._pad, self._widths = padding(self.views, truncation, truncation_width, object_radius_mm)
         self._provenance = {"method": "FDK" if vec.beam == "cone" else "FBP", "geometry": geometry.to_dict(),
                             "filter": filter, "cutoff": cutoff, "scan": self.views.scan,
                             "displaced": self.views.displaced, "truncation": truncation,
@@ -244,19 +243,6 @@ class FDKStream:
         if self.ctx is not None:
             self.release()
 
-    def _padding(self, truncation, width: float, reach_mm: float | None) -> tuple[int, np.ndarray]:
-        """Columns extrapolated at most past each edge, and (views, 2) the mirrors' roll-off widths
-        (truncation.py): from an object's known reach (:func:`reach_padding`), else ``width`` × the
-        detector width for both."""
-        cols = self.views.detector_shape[1]
-        if truncation is False:
-            return 0, np.zeros((len(self.views.scale), 2), int)
-        if reach_mm is None:
-            pad = padding_columns(cols, width)
-            return pad, np.full((len(self.views.scale), 2), pad)
-        return reach_padding(self.views.vectors, self.views.toward_axis, self.views.detector_shape,
-                             self.views.beam == "cone", reach_mm, round(MAX_WIDTH * cols))
-
     # -- stage 1: pre-weight and ramp-filter every row of a batch --------------------------------
 
     def _filter_setup(self) -> None:
@@ -317,7 +303,8 @@ class FDKStream:
             return out_dev
         cl.enqueue_fill_buffer(ctx.queue, out_dev, np.float32(0), 0, size + WINDOW_PAD)
         raw_dev = ctx.buffer(raw, "r")
-        extension_dev = ctx.buffer(self._extensions(batch, raw, ends, pad), "r")
+        part = slice(batch.start, batch.stop)
+        extension_dev = ctx.buffer(kernel_extensions(raw, self.views, part, ends, pad, self._widths[part]), "r")
         red_dev = ctx.buffer(self.views.redundancy[batch.start : batch.stop].astype(np.float32), "r")
         geo_dev = ctx.buffer(self._geo[batch.start : batch.stop], "r")
         scratch = ctx.buffer(count * pairs * n * 8) if self.plan.global_scratch else self._local_scratch
@@ -329,18 +316,6 @@ class FDKStream:
         for buffer in (raw_dev, red_dev, geo_dev, extension_dev) + ((scratch,) if self.plan.global_scratch else ()):
             buffer.release()  # after the kernel: OpenCL keeps them alive until it has run
         return out_dev
-
-    def _extensions(self, batch: range, raw: np.ndarray, ends: np.ndarray, pad: int) -> np.ndarray:
-        """(views, rows, 2, pad) float32 for the kernel: the values its rows take past each edge,
-        computed here from the pre-weighted rows (one float when nothing is extrapolated)."""
-        if not pad or not ends.any():
-            return np.zeros(max(1, len(batch) * raw.shape[1] * 2 * pad), np.float32)
-        views, part = self.views, slice(batch.start, batch.stop)
-        rows, cols = views.detector_shape
-        q = raw * pre_weights(views.vectors[part], views.toward_axis[part], views.redundancy[part], rows, cols,
-                               views.beam == "cone")
-        return row_extensions(q, ends, views.vectors[part], views.toward_axis[part], views.beam == "cone", pad,
-                              self._widths[part])
 
     # -- stage 2: a batch's filtered views into the voxels of one z-slab -------------------------
 

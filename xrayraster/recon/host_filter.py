@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.fft
 
+from .fdk_weights import FDKViews
 from .truncation import row_extensions
 
 CHUNK_BYTES = 64 << 20  # padded rows filtered per FFT call, at most: bounds the scratch memory
@@ -60,6 +61,20 @@ def filter_rows_host(lineint: np.ndarray, vectors: np.ndarray, toward_axis: np.n
         else:
             out[part, 1:-1, 1:-1] = filtered
     return out
+
+
+def kernel_extensions(lineint: np.ndarray, views: FDKViews, part: slice, ends: np.ndarray, pad: int,
+                      widths: np.ndarray) -> np.ndarray:
+    """(views, rows, 2, pad) float32 for ``shaders/fdk_filter.cl``: the values the rows of views
+    ``part`` take past each edge (:func:`~xrayraster.recon.truncation.row_extensions`), from the
+    pre-weighted rows; one float when nothing is extrapolated. The kernel filters on the device,
+    but the fits are made here."""
+    if not pad or not ends.any():
+        return np.zeros(max(1, lineint.shape[0] * lineint.shape[1] * 2 * pad), np.float32)
+    rows, cols = views.detector_shape
+    cone = views.beam == "cone"
+    q = lineint * pre_weights(views.vectors[part], views.toward_axis[part], views.redundancy[part], rows, cols, cone)
+    return row_extensions(q, ends, views.vectors[part], views.toward_axis[part], cone, pad, widths)
 
 
 def pre_weights(vectors, toward_axis, redundancy, rows: int, cols: int, cone: bool) -> np.ndarray:

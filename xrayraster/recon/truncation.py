@@ -46,6 +46,7 @@ import numpy as np
 
 from ..core.choices import is_switch
 from ..core.errors import ReconstructionError
+from .fdk_weights import FDKViews
 
 EDGE_PIXELS = 4  # outermost pixels averaged to decide whether a row end is truncated (noise)
 THRESHOLD = 0.02  # line integral (−ln of a 98 % transmission) at the edge that counts as an object
@@ -69,6 +70,19 @@ def check_truncation(truncation, width) -> None:
 def padding_columns(cols: int, width: float) -> int:
     """Columns extrapolated past each edge: ``width`` × the detector's columns, at least 1."""
     return max(1, round(width * cols))
+
+
+def padding(views: FDKViews, truncation, width: float, reach_mm: float | None) -> tuple[int, np.ndarray]:
+    """Columns extrapolated at most past each edge, and (views, 2) the mirrors' roll-off widths:
+    from an object's known reach (:func:`reach_padding`), else ``width`` × the detector width for both."""
+    count, cols = len(views.scale), views.detector_shape[1]
+    if truncation is False:
+        return 0, np.zeros((count, 2), int)
+    if reach_mm is None:
+        pad = padding_columns(cols, width)
+        return pad, np.full((count, 2), pad)
+    return reach_padding(views.vectors, views.toward_axis, views.detector_shape, views.beam == "cone", reach_mm,
+                         round(MAX_WIDTH * cols))
 
 
 def lateral_positions(vectors: np.ndarray, toward_axis: np.ndarray, rows: np.ndarray, shape: tuple[int, int],
