@@ -28,7 +28,7 @@ void main() {
         uint units = fixed_units(ts[i]);
         if (owner >= 0) acc[object_info(uint(owner)).x] += units - previous;
         previous = units;
-        owner = sweep(i);
+        owner = sweep(i, owner);
     }
     int npix = u_size.x * u_size.y;
     for (int c = 0; c < NUM_CHANNELS; c++) lengths[c * npix + pixel] = float(int(acc[c])) / u_fixed_scale;

@@ -34,7 +34,7 @@ void main() {
     uint word = 0u;
     for (int s = 0; s < u_slices; s++) {
         float t = u_t0 + float(s) * u_dt;
-        for (; i < n && ts[i] < t; i++) owner = sweep(i);
+        for (; i < n && ts[i] < t; i++) owner = sweep(i, owner);
         uint label = owner < 0 ? 0u : object_info(uint(owner)).w;
         int lane = s % LABELS_PER_WORD;
         word |= label << (BITS * lane);
