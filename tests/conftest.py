@@ -1,7 +1,7 @@
 """Shared fixtures. Capabilities (a GL driver, the OSMesa fallback, an OpenCL device) are probed
 once; a missing one skips with the reason, unless XRAYRASTER_REQUIRE_GL=1 /
-XRAYRASTER_REQUIRE_OSMESA=1 / XRAYRASTER_REQUIRE_OPENCL=1 (set by .ci/run), which turn that skip
-into a failure."""
+XRAYRASTER_REQUIRE_OSMESA=1 / XRAYRASTER_REQUIRE_OPENCL=1 / XRAYRASTER_REQUIRE_BROWSER=1 (set by
+.ci/run), which turn that skip into a failure."""
 
 from __future__ import annotations
 
@@ -47,6 +47,26 @@ def cl():
     from xrayraster.recon.opencl import CLContext, OpenCLError
 
     yield from _context("OPENCL", CLContext, OpenCLError)
+
+
+@pytest.fixture(scope="session")
+def browser():
+    """Debian's Chromium, headless, driven by Selenium (the preview's page tests)."""
+    from scripts.common import CHROMEDRIVER, CHROMIUM, headless_chromium
+
+    missing = [p for p in (CHROMIUM, CHROMEDRIVER) if not os.path.exists(p)]
+    if missing:
+        _require("BROWSER", f"no {' or '.join(missing)}: apt-get install chromium chromium-driver")
+    try:
+        from selenium.common.exceptions import WebDriverException
+    except ImportError as exc:
+        _require("BROWSER", f"selenium is not importable ({exc}): pip install selenium")
+    try:
+        driver = headless_chromium()
+    except WebDriverException as exc:
+        _require("BROWSER", f"Chromium did not start: {str(exc).splitlines()[0]}")
+    yield driver
+    driver.quit()
 
 
 @pytest.fixture

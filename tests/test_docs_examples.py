@@ -190,6 +190,7 @@ def test_ci_runs_the_readme_command_verbatim():
     pytest_lines = [line for line in code if "python -m pytest" in line]
     assert pytest_lines and all("XRAYRASTER_REQUIRE_GL=1" in line and "XRAYRASTER_REQUIRE_OPENCL=1" in line
                                 for line in pytest_lines)
+    assert any(line.startswith("export XRAYRASTER_REQUIRE_BROWSER=1") for line in code)  # no page test skips
 
 
 LINK = re.compile(r"\]\(([^)\s]+)\)")

@@ -114,6 +114,20 @@ class PathLengthRenderer:
         np.maximum(out, 0.0, out=out)
         return out
 
+    def retarget(self, geometry) -> None:
+        """Render ``geometry``'s views from now on. With the same detector shape the GL context,
+        the compiled shaders, the scratch buffers and the uploaded scene are kept (a preview
+        turning the sample or moving the source pays for none of them again); another shape
+        starts a new crossing engine on the same context."""
+        vector_geometry = as_vector_geometry(geometry)
+        render_vec = _refine(vector_geometry, self.supersampling)
+        if render_vec.detector_shape != self._render_vec.detector_shape:
+            self.engine.release()
+            self.engine = CrossingEngine(render_vec, self.gl, self.small_triangle_pixels)
+        self.geometry, self.vector_geometry, self._render_vec = geometry, vector_geometry, render_vec
+        self.engine.geometry = render_vec
+        self._check_size()
+
     def release(self) -> None:
         if self.gl is None:
             return

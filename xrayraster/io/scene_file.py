@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import tomllib
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -81,9 +82,16 @@ def read_toml(path: Path, kind: str) -> dict:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from None
 
 
-def load_scene_file(path) -> SceneFile:
-    path = Path(path)
-    data = read_toml(path, "scene file")
+def load_scene_file(source, *, where: str = "scene table", base_dir=None) -> SceneFile:
+    """Read and check a scene file, or the dict of one already parsed (the preview's edited table):
+    then ``where`` names it in messages and as the result's ``path``, and mesh and spectrum files
+    are relative to ``base_dir`` (default: the current directory). Errors are ConfigErrors naming
+    the file (or ``where``), the table and the key."""
+    if isinstance(source, Mapping):
+        path, data, base = Path(where), source, Path(base_dir if base_dir is not None else ".")
+    else:
+        path = Path(source)
+        data, base = read_toml(path, "scene file"), path.parent
     fields.only(data, {"geometry", "objects", "materials", "source", "detector"}, f"{path}")
     if "geometry" not in data:
         raise ConfigError(f"{path}: missing [geometry] table")
@@ -104,12 +112,12 @@ def load_scene_file(path) -> SceneFile:
         where = f"{path} [[objects]] #{k + 1}"
         if not isinstance(spec, dict):
             raise ConfigError(f"{where}: must be a table ([[objects]]), got {spec!r}")
-        _add_object(scene, spec, path.parent, where, materials, library)
+        _add_object(scene, spec, base, where, materials, library)
     if library and (materials is not None or all(isinstance(o.material, Material) for o in scene.objects)):
         materials = {**library, **(materials or {})}
     spectrum = None
     if "source" in data:
-        spectrum = _source(fields.table(data["source"], "source", f"{path}"), path.parent, f"{path} [source]")
+        spectrum = _source(fields.table(data["source"], "source", f"{path}"), base, f"{path} [source]")
     detector = None
     if "detector" in data:
         detector = _detector(fields.table(data["detector"], "detector", f"{path}"), materials, f"{path} [detector]")

@@ -4,6 +4,7 @@ detector, noise). GL knows nothing of photons and the physics nothing of GL; thi
 from __future__ import annotations
 
 import sys
+import time
 
 import numpy as np
 
@@ -29,6 +30,7 @@ class Renderer(PathLengthRenderer):
         self.threads = thread_count(threads)  # checked before a GL context is made
         self._calibration = None  # (key, gain map, flat noise) of the last scan projected: see _fixed_patterns
         self._model = None  # (key, SpectralModel) of the last scene projected: see _spectral_model
+        self.last_seconds: dict[str, float] = {}  # the last project()'s GL path lengths and CPU physics, s
         super().__init__(geometry, **options)
 
     def project(self, scene: Scene, spectrum, view: int = 0, *, detector: Detector | None = None,
@@ -54,15 +56,24 @@ class Renderer(PathLengthRenderer):
         if realism.needs_seed and seed is None:
             raise RenderError("flat_fields and gain_variation need a seed (an int): their patterns are drawn from it")
         detector = detector or Detector()
+        start = time.perf_counter()
         lengths = self.path_lengths(scene, view)
+        traced = time.perf_counter()
         view %= self.vector_geometry.num_views
         rng = np.random.default_rng([int(seed), view]) if noise else None
         factor = pixel_photon_factor(self.vector_geometry, view)
         gain, flat = self._fixed_patterns(spectrum, detector, realism, seed)
         model = self._spectral_model(scene, spectrum, detector, spectral_table and noise)
-        return radiograph(lengths, scene.materials, spectrum, detector, factor, output=output, noise=noise, rng=rng,
+        shot = radiograph(lengths, scene.materials, spectrum, detector, factor, output=output, noise=noise, rng=rng,
                           threads=self.threads, focal_sigma_px=self._focal_sigma_px(realism, view), gain=gain,
                           flat_noise=flat, model=model)
+        self.last_seconds = {"path_lengths": traced - start, "physics": time.perf_counter() - traced}
+        return shot
+
+    def retarget(self, geometry) -> None:
+        """:meth:`PathLengthRenderer.retarget`; the scan's flats and gain map are drawn anew for it."""
+        super().retarget(geometry)
+        self._calibration = None
 
     def _spectral_model(self, scene: Scene, spectrum, detector: Detector, table: bool) -> SpectralModel:
         """The scene's bins, μ and (``table``) spectral table, kept for the next view of the same scene.

@@ -1,0 +1,29 @@
+"""``xrayraster preview FILE.toml``: a live radiograph of a scene or scan file in a web page (docs/preview.md)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..io.optional import optional_module
+from .options import positive_int
+
+
+def add_parser(subparsers) -> None:
+    preview = subparsers.add_parser("preview", help="tune a scan by looking at its radiographs, live, in a web page")
+    preview.add_argument("file", type=Path, help="scene file (docs/scene-format.md) or scan file (docs/scan.md)")
+    preview.add_argument("--host", default="127.0.0.1",
+                         help="address to listen on (default 127.0.0.1: this machine only; reach it over SSH with "
+                              "ssh -L 8000:127.0.0.1:8000). Any other needs the printed address's token")
+    preview.add_argument("--port", type=positive_int, default=8000, help="port (default 8000)")
+    preview.add_argument("--open", action="store_true", help="open the page in this machine's web browser")
+    preview.add_argument("-v", "--verbose", action="store_true")
+    preview.set_defaults(run=run)
+
+
+def run(args) -> int:
+    for module in ("starlette", "uvicorn", "websockets", "tomli_w"):
+        optional_module(module, "preview", "xrayraster preview")
+    from ..preview.server import serve
+
+    serve(args.file, host=args.host, port=args.port, open_browser=args.open)
+    return 0

@@ -1,0 +1,136 @@
+"""The file a preview shows: a scene file or a scan file as its TOML tables, edited key by key
+(dotted keys, as a dataset's ``[vary]`` names them: ``source.kvp``, ``weave.sample.seed``), checked
+by the file's own loader, and written back as a TOML file that ``xrayraster render`` (a scene
+file) or ``xrayraster scan`` and ``build`` (a scan file) take unchanged.
+
+The view options that are not keys of the file (the angle, what is shown, the noise of a scene
+file's radiograph) live in :class:`View`; a saved file carries the angle as its first view, so
+view 0 of the saved file is the view on screen.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..core.choices import RADIOGRAPH_OUTPUTS
+from ..core.errors import ConfigError
+from ..io.scene_file import load_scene_file, read_toml
+from ..pipeline.scan_file import load_scan_file
+from ..pipeline.scan_keys import absolute_paths, check_key, set_key
+
+#: Tables only a scan file has: a file with none of them is a scene file (``xrayraster render``'s).
+SCAN_TABLES = {"weave", "volume", "scan", "pose", "mount"}
+#: What a frame shows: a radiograph quantity, or the path length (mm) through one material.
+OUTPUTS = (*RADIOGRAPH_OUTPUTS, "path_length")
+
+
+@dataclass(frozen=True)
+class View:
+    """What the preview shows of a document: ``angle_deg`` (the first view's angle, degrees; None:
+    the file's own), ``output`` (one of :data:`OUTPUTS`), ``material`` (the channel a path-length
+    frame shows), photon ``noise`` and its ``seed`` (a scan file's ``[scan]`` keys when it is one)."""
+
+    angle_deg: float | None = None
+    output: str = "lineint"
+    material: int = 0
+    noise: bool = False
+    seed: int = 0
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "View":
+        """The view a page asks for; ConfigError naming the field when a value is unusable."""
+        unknown = sorted(set(d) - {f.name for f in dataclasses.fields(cls)})
+        if unknown:
+            raise ConfigError(f"view: unknown field(s) {', '.join(unknown)}")
+        angle = d.get("angle_deg")
+        if angle is not None and (not isinstance(angle, (int, float)) or not math.isfinite(angle)):
+            raise ConfigError(f"view: angle_deg must be a number of degrees, got {angle!r}")
+        output = d.get("output", "lineint")
+        if output not in OUTPUTS:
+            raise ConfigError(f"view: output must be one of {', '.join(OUTPUTS)}, got {output!r}")
+        material, seed = d.get("material", 0), d.get("seed", 0)
+        for name, value in (("material", material), ("seed", seed)):
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise ConfigError(f"view: {name} must be an integer >= 0, got {value!r}")
+        return cls(None if angle is None else float(angle), output, material, bool(d.get("noise", False)), seed)
+
+
+@dataclass(frozen=True, eq=False)
+class Document:
+    """A scene or scan file's tables (``kind`` "scene" or "scan"), with file paths made absolute so
+    the tables load, and save, from anywhere. Never changed in place: :meth:`edited` makes another."""
+
+    path: Path
+    kind: str
+    table: dict
+
+    @classmethod
+    def open(cls, path) -> "Document":
+        path = Path(path)
+        data = read_toml(path, "preview file")
+        if "weave" in data and set(data) <= {"weave", "materials"}:
+            raise ConfigError(f"{path}: a weave file has no scanner to preview it with; put its tables under a scan "
+                              "file's [weave] table (docs/scan.md) and preview that")
+        kind = "scan" if SCAN_TABLES & set(data) else "scene"
+        document = cls(path, kind, absolute_paths(data, path.resolve().parent))
+        document.load()  # a bad file fails before a server starts
+        return document
+
+    def load(self):
+        """The file as its loader reads it (``SceneFile`` or ``ScanFile``); ConfigError naming the key."""
+        base = self.path.resolve().parent
+        if self.kind == "scan":
+            return load_scan_file(self.table, where=str(self.path), base_dir=base)
+        return load_scene_file(self.table, where=str(self.path), base_dir=base)
+
+    def edited(self, edits: dict) -> "Document":
+        """This document with ``edits`` ({dotted key: value}, a value of None removing the key)
+        applied; the keys are checked here, the values by :meth:`load`."""
+        table = copy.deepcopy(self.table)
+        for key, value in edits.items():
+            check_key(key, table, f"{self.path}")
+            if value is None:
+                *parents, last = key.split(".")
+                holder = table
+                for part in parents:
+                    holder = holder.get(part, {}) if isinstance(holder, dict) else {}
+                if isinstance(holder, dict):
+                    holder.pop(last, None)
+            else:
+                set_key(table, key, value)
+        return Document(self.path, self.kind, table)
+
+    def initial_view(self) -> View:
+        """The view a page opens with: a scan file's own noise and seed (its scan's defaults)."""
+        if self.kind == "scan":
+            options = self.load().options
+            return View(noise=options.noise, seed=options.seed)
+        return View()
+
+    def saved(self, view: View) -> dict:
+        """The tables to save for ``view``: its angle as the first view's (``start_angle_deg``, or
+        the ``angles_deg`` turned with it) and, for a scan file, its noise and seed."""
+        table = copy.deepcopy(self.table)
+        geometry = table.get("geometry", {})
+        if view.angle_deg is not None and "vectors" not in geometry:
+            if "angles_deg" in geometry:
+                turn = view.angle_deg - geometry["angles_deg"][0]
+                geometry["angles_deg"] = [a + turn for a in geometry["angles_deg"]]
+            else:
+                geometry["start_angle_deg"] = view.angle_deg
+        if self.kind == "scan":
+            table.setdefault("scan", {}).update(noise=view.noise, seed=view.seed)
+        return table
+
+    def command(self, name: str, view: View) -> str:
+        """The command line that renders view 0 of the file saved as ``name`` as the preview shows it."""
+        if self.kind == "scan":
+            return f"xrayraster scan {name} -o scan"
+        if view.output == "path_length":
+            return f"xrayraster render {name} -o view.tif --path-lengths"
+        noise = f" --noise --seed {view.seed}" if view.noise else ""
+        return f"xrayraster render {name} -o view.tif --output {view.output}{noise}"

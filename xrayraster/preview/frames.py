@@ -1,0 +1,172 @@
+"""Frames of a preview: view 0 of a document, rendered as ``xrayraster render`` (a scene file) or
+``xrayraster scan`` (a scan file) renders it, by one :class:`~xrayraster.Renderer` kept across
+frames.
+
+A frame does only what changed since the last one (the module's one job): turning the sample
+only retargets the renderer (no mesh upload, no spectrum, no shader compiled again); a new
+spectrum or detector reloads the file's tables (SpekPy keeps its tube model while only the mAs
+changes); the sample is meshed again only when a key below it changed; a path-length frame does
+no spectral sum.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.errors import ConfigError
+from ..core.projections import Projections
+from ..physics.detector import Detector
+from ..simulate.renderer import Renderer
+from .document import Document, View
+
+#: Keys of a scan file that leave its sample as it is: a change below them meshes nothing again.
+_NOT_THE_SAMPLE = ("geometry", "source", "detector")
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One rendered view: ``image`` float32 (rows, cols) in ``unit``, what it shows (``quantity``),
+    the angle of the view (degrees), and the seconds of each stage."""
+
+    image: np.ndarray
+    quantity: str
+    unit: str
+    angle_deg: float | None
+    seconds: dict
+    layout: dict | None = None  # the scan seen from above (:func:`layout`)
+
+
+class Previewer:
+    """Renders frames of documents on its own GL context (made on the first frame, in the thread
+    that renders: a GL context is current in one thread). ``threads``: the spectral sum's."""
+
+    def __init__(self, threads: int | None = None):
+        self.threads = threads
+        self._renderer: Renderer | None = None
+        self._loaded = (None, None)  # (tables as JSON, SceneFile or ScanFile)
+        self._sample = (None, None)  # (the sample's tables as JSON, the scene the projections see)
+
+    def frame(self, document: Document, view: View) -> Frame:
+        start = time.perf_counter()
+        loaded, scene, renderer = self._prepare(document, view)
+        geometry = renderer.geometry
+        prepared = time.perf_counter()
+        if view.output == "path_length":
+            image = renderer.path_lengths(scene, 0)[view.material]
+            seconds = {"path_lengths": time.perf_counter() - prepared}
+            quantity, unit = f"path length: {_name(scene.materials[view.material])}", "mm"
+        else:
+            options = self._options(document, view, loaded)
+            shot = renderer.project(scene, loaded.spectrum, 0, **options)
+            image, seconds = shot.image, dict(renderer.last_seconds)
+            quantity = view.output
+            unit = "1" if view.output != "raw" else "counts" if options["detector"].counting else "keV deposited"
+        angle = math.degrees(geometry.angles[0]) if hasattr(geometry, "angles") else None
+        return Frame(image, quantity, unit, angle, {"prepare": prepared - start, **seconds},
+                     layout(renderer.vector_geometry, scene.bounds))
+
+    def projections(self, document: Document, view: View) -> Projections:
+        """View 0 as the command line writes it (:meth:`Document.command`): path lengths of every
+        material, or the radiograph, with the same provenance, for a TIFF the same as its."""
+        loaded, scene, renderer = self._prepare(document, view)
+        if view.output == "path_length":
+            return renderer.path_lengths_all(scene, [0], progress=False)
+        return renderer.project_all(scene, loaded.spectrum, [0], progress=False, **self._options(document, view, loaded))
+
+    def release(self) -> None:
+        if self._renderer is not None:
+            self._renderer.release()
+            self._renderer = None
+
+    # -- what changed ----------------------------------------------------------------------------
+
+    def _prepare(self, document: Document, view: View):
+        """The loaded file, the scene its projections see, and the renderer pointed at the view."""
+        loaded = self.load(document)
+        scene = self.scene(document, loaded)
+        if view.output == "path_length" and view.material >= len(scene.materials):
+            raise ConfigError(f"view: material {view.material} is not one of the scene's "
+                              f"{len(scene.materials)} materials (0 to {len(scene.materials) - 1})")
+        return loaded, scene, self._renderer_for(turned(loaded.geometry, view.angle_deg), document)
+
+    @staticmethod
+    def _options(document: Document, view: View, loaded) -> dict:
+        """``Renderer.project``'s options as ``render`` (a scene file) or ``scan`` (a scan file: noisy
+        views interpolate their spectral sums) sets them."""
+        return dict(detector=loaded.detector if loaded.detector is not None else Detector(), output=view.output,
+                    noise=view.noise, seed=view.seed if view.noise or loaded.realism.needs_seed else None,
+                    realism=loaded.realism, spectral_table=document.kind == "scan" and view.noise)
+
+    def load(self, document: Document):
+        """The document as its loader reads it, loaded again only when its tables changed."""
+        key = json.dumps(document.table, sort_keys=True)
+        if self._loaded[0] != key:
+            loaded = document.load()
+            if document.kind == "scene" and loaded.spectrum is None:
+                raise ConfigError(f"{document.path}: a preview shows radiographs, so the file needs a [source] table "
+                                  "(the X-ray spectrum) and [materials] (docs/scene-format.md)")
+            self._loaded = (key, loaded)
+        return self._loaded[1]
+
+    def scene(self, document: Document, loaded):
+        """The scene the projections see: a scene file's objects, or a scan file's sample (meshed
+        again only when its tables changed) with its mount."""
+        if document.kind == "scene":
+            return loaded.scene
+        key = json.dumps({k: v for k, v in document.table.items() if k not in _NOT_THE_SAMPLE}, sort_keys=True)
+        if self._sample[0] != key:
+            self._sample = (key, loaded.with_mount(loaded.sample_scene()))
+        return self._sample[1]
+
+    def _renderer_for(self, geometry, document: Document) -> Renderer:
+        # A woven sample's yarns interpenetrate: its renderer resolves overlaps as xrayraster scan's does.
+        overlap = "resolve" if document.kind == "scan" and "weave" in document.table else "auto"
+        renderer = self._renderer
+        if renderer is not None and renderer.overlap != overlap:
+            renderer.release()
+            renderer = None
+        if renderer is None:
+            renderer = self._renderer = Renderer(geometry, overlap=overlap, threads=self.threads)
+        elif renderer.geometry != geometry:
+            renderer.retarget(geometry)
+        return renderer
+
+
+def turned(geometry, angle_deg: float | None):
+    """``geometry`` turned so its first view is at ``angle_deg`` (its views keep their spacing);
+    as it is for None or a per-view vector geometry, which has no angle to turn."""
+    if angle_deg is None or not hasattr(geometry, "angles"):
+        return geometry
+    # The first angle exactly as a file's start_angle_deg gives it, so a saved file's view 0 is this one.
+    first, start = math.radians(angle_deg), geometry.angles[0]
+    return dataclasses.replace(geometry, angles=tuple(first + (a - start) for a in geometry.angles))
+
+
+def _name(material) -> str:
+    return getattr(material, "name", str(material))
+
+
+def layout(vector_geometry, bounds) -> dict:
+    """View 0 seen from above (x, y in mm, the rotation axis at 0): the source (None for a parallel
+    beam), the detector's two ends, the corners of the scene's bounding box, and the radius of the
+    field of view (the circle every ray of the view's fan, or band, covers)."""
+    s, d, u, _ = np.split(vector_geometry.array[0], 4)
+    half = u * vector_geometry.detector_shape[1] / 2
+    ends = [d - half, d + half]
+    cone = vector_geometry.beam == "cone"
+
+    def reach(end):  # the distance of the edge ray through ``end`` from the axis, seen from above
+        direction = (end - s if cone else s)[:2]
+        cross = direction[0] * end[1] - direction[1] * end[0]
+        return abs(float(cross)) / max(float(np.linalg.norm(direction)), 1e-300)
+
+    (x0, y0, _), (x1, y1, _) = bounds
+    return {"source": s[:2].tolist() if cone else None, "direction": None if cone else s[:2].tolist(),
+            "detector": [e[:2].tolist() for e in ends], "fov_mm": min(reach(e) for e in ends),
+            "sample": [[x0, y0], [x1, y0], [x1, y1], [x0, y1]]}
