@@ -7,8 +7,8 @@ The scene is the reference twin's small sample (``examples/twin_small.toml``: 2 
 three materials, 40 kV, photon noise on) on a 512 × 512 detector of 0.135 mm pixels, meshed at a
 tolerance of 0.04 voxel: about 200 k triangles. ``xrayraster preview`` serves it
 (:class:`xrayraster.preview.server.Background`, every core), and Debian's Chromium, headless and
-driven by Selenium, loads the page (and after the drag takes the screenshot docs/preview.png shows;
---quick: out/preview.png). The drag is the angle slider's ``input`` events at 60 a second
+driven by Selenium, loads the page (and after the drag asks for the quick slice and takes the
+screenshot docs/preview.png shows; --quick: out/preview.png). The drag is the angle slider's ``input`` events at 60 a second
 (a hand on a 60 Hz display) for ``--seconds``, each 0.5° on from the last; the page sends the newest
 state whenever the frame before has come back (xrayraster/preview/static/preview.js). Frames a
 second are the frames painted during the drag over its length; the latency of a frame runs from
@@ -69,6 +69,13 @@ const t = setInterval(() => { if (xrPreview.painted > painted) { clearInterval(t
 """
 
 
+SLICE = """
+const done = arguments[0];
+document.getElementById('slice').click();
+const t = setInterval(() => { if (xrPreview.slice) { clearInterval(t); done(); } }, 50);
+"""
+
+
 def scan_file(size: str) -> Path:
     pixels, pitch, tolerance = SIZES[size]
     text = (ROOT / "examples" / "twin_small.toml").read_text()
@@ -109,6 +116,8 @@ def main() -> None:
             # Noise on for the drag, as a user tunes a noisy scan; off for the error check at the end.
             driver.execute_async_script(NOISE, True)
             drag = driver.execute_async_script(DRAG, args.seconds)
+            driver.execute_async_script(SLICE)
+            driver.set_window_size(1400, 1150)
             driver.save_screenshot(str((OUT if args.quick else ROOT / "docs") / "preview.png"))
             seconds = driver.execute_script("return xrPreview.frame.header.seconds;")
             seconds["page"] = driver.execute_script("return xrPreview.pageMs;") / 1000

@@ -179,6 +179,8 @@ def test_the_server_answers_frames_and_errors_and_keeps_serving(scene_file, gl):
         assert saved.status_code == 200 and "start_angle_deg = 30.0" in saved.text and "mas = 2.0" in saved.text
         bad = c.post("/save/settings.toml", json={"edits": {"source.mass": 2.0}, "view": {}})
         assert bad.status_code == 400 and "no key 'mass'" in bad.json()["error"]
+        refused = c.post("/slice", json={"edits": {}, "view": {}})
+        assert refused.status_code == 400 and "a slice needs a scan file" in refused.json()["error"]
 
 
 def test_other_origins_hosts_and_missing_tokens_are_refused(scene_file, gl):
@@ -224,6 +226,58 @@ def test_the_layout_is_the_scan_seen_from_above(scene_file, previewer):
     assert np.linalg.norm(source) == pytest.approx(100.0)  # source_to_origin
     assert np.linalg.norm(ends, axis=1) == pytest.approx([np.hypot(150.0, half)] * 2)  # 250 − 100 mm beyond the axis
     assert fov == pytest.approx(100.0 * half / np.hypot(250.0, half))  # the fan's edge rays' distance from the axis
+
+
+def test_a_quick_slice_is_the_middle_of_the_grid_from_a_cut_down_scan(previewer):
+    from xrayraster.core.volume import VolumeGeometry
+    from xrayraster.pipeline import load_scan_file
+
+    document = Document.open(EXAMPLES / "twin_small.toml")
+    cut = previewer.quick_slice(document, document.initial_view())
+    loaded = load_scan_file(EXAMPLES / "twin_small.toml")  # 120 views of 32 × 128 onto a (24, 128, 128) grid
+    assert cut.views == 90 and cut.detector_shape[1] == 128 and cut.detector_shape[0] <= 32
+    assert cut.image.shape == cut.labels.shape == (128, 128)
+    assert cut.z_mm == pytest.approx(0.5 * 0.2312)  # the middle slice (12 of 24), 0.2312 mm voxels
+    # The labels are those of the sample on that one slice, as xr.voxelize gives them on its own.
+    grid = VolumeGeometry((1, 128, 128), 0.2312, (cut.z_mm, 0.0, 0.0))
+    np.testing.assert_array_equal(cut.labels, xr.voxelize(loaded.sample_scene(), grid).data[0])
+    assert cut.names == {0: "air", 1: "matrix", 2: "weft", 3: "warp"}
+    # Denser carbon reconstructs higher: warp (1.82 g/cm³) over weft (1.72) over matrix (1.08) over air.
+    means = [float(cut.image[cut.labels == k].mean()) for k in range(4)]
+    assert abs(means[0]) < 0.2 * means[1] and means[1] < means[2] < means[3]
+    with pytest.raises(ConfigError, match="a slice needs a scan file"):
+        previewer.quick_slice(Document.open(EXAMPLES / "bracket_and_ball.toml"), View())
+
+
+def test_show_is_the_array_in_grey_beside_its_colour_bar():
+    from xrayraster.core.figure import grey
+
+    ramp = np.linspace(0.0, 2.0, 20 * 30).reshape(20, 30)
+    picture = np.asarray(xr.show(ramp, window=(0.5, 1.5), unit="1/cm"))
+    factor = 400 // 30  # enlarged to about 400 px
+    shown = picture[6:6 + 20 * factor:factor, 6:6 + 30 * factor:factor, 0]
+    np.testing.assert_array_equal(shown, grey(ramp, (0.5, 1.5)))
+    bar = picture[6:6 + 20 * factor, 6 + 30 * factor + 19, 0].astype(int)  # the bar's first column
+    assert bar[2] > 250 and bar[-3] < 5 and np.all(np.diff(bar[1:-1]) <= 0)  # white at the top, black below
+    middle = np.asarray(xr.show(np.stack([ramp * 0, ramp, ramp * 0]), window=(0.5, 1.5)))
+    np.testing.assert_array_equal(middle[6:6 + 20 * factor:factor, 6:6 + 30 * factor:factor, 0], shown)
+    with pytest.raises(ConfigError, match="show takes a 2-D array"):
+        xr.show(np.zeros(5))
+
+
+def test_xr_preview_serves_the_page_once_per_file(scene_file, gl):
+    import urllib.request
+
+    from xrayraster.preview.notebook import _RUNNING
+
+    first, again = xr.preview(scene_file), xr.preview(scene_file)
+    url = getattr(first, "src", getattr(first, "url", None))  # an IFrame where IPython is installed
+    try:
+        assert url == getattr(again, "src", getattr(again, "url", None))
+        with urllib.request.urlopen(url) as page:
+            assert page.status == 200 and b"xrayraster preview" in page.read()
+    finally:
+        _RUNNING.pop(str(scene_file.resolve())).stop()
 
 
 # -- the page in a browser ---------------------------------------------------------------------
@@ -324,3 +378,20 @@ def test_the_page_turns_paints_reports_errors_and_saves_what_render_renders(brow
         within_a_level(header, final, tifffile.imread(out))
         if os.environ.get("XRAYRASTER_PREVIEW_SCREENSHOT"):
             browser.save_screenshot(os.environ["XRAYRASTER_PREVIEW_SCREENSHOT"])
+
+
+def test_the_slice_button_shows_the_quick_slice_and_its_labels(browser, previewer):
+    from selenium.webdriver.common.by import By
+
+    document = Document.open(EXAMPLES / "twin_small.toml")
+    expected = previewer.quick_slice(document, document.initial_view())
+    with Background(EXAMPLES / "twin_small.toml", port=free_port(), threads=1) as server:
+        browser.get(server.url)
+        wait_for(lambda: frames(browser) >= 1, "the first frame")
+        browser.find_element(By.ID, "slice").click()
+        cut = wait_for(lambda: browser.execute_script("return xrPreview.slice || null;"), "the quick slice")
+        caption = browser.find_element(By.ID, "slice-caption").text
+        legend = browser.find_element(By.ID, "slice-legend").text
+    np.testing.assert_array_equal(np.array(cut["labels"]).reshape(expected.labels.shape), expected.labels)
+    assert cut["header"]["views"] == 90 and "90 views" in caption and "1/cm" in caption
+    assert legend.split() == ["1", "matrix", "2", "weft", "3", "warp"]

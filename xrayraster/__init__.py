@@ -9,9 +9,10 @@ reconstructed volumes, as CT tools report it (``Volume.data`` with ``Volume.unit
 1 mm⁻¹ = 10 cm⁻¹). Mass attenuation μ/ρ is cm²/g and density g/cm³, as the tables give them.
 """
 
+import importlib
 import types
 
-from . import weave  # xr.weave.UnitCell, xr.weave.Sample, and callable: _CallableModule below
+from . import preview, weave  # subpackages, and callable: _CallableModule below
 from .core.lazy import lazy_names
 
 __version__ = "0.1.0"
@@ -25,6 +26,7 @@ _HOMES = {
         "StarvationError", "StarvationWarning", "WeaveError", "XrayrasterError", "XrayrasterWarning",
     ),
     ".core.geometry": ("ConeBeamGeometry", "ParallelBeamGeometry", "VectorGeometry", "full_circle"),
+    ".core.pictures": ("show",),
     ".core.projections": ("Projections",),
     ".core.transform": ("Transform",),
     ".core.volume": ("VolumeGeometry",),
@@ -43,24 +45,27 @@ _HOMES = {
     ".simulate.renderer": ("Renderer",),
 }
 __getattr__, __dir__ = lazy_names(globals(), _HOMES)
-__all__ = sorted([*(name for names in _HOMES.values() for name in names), "weave"])
+__all__ = sorted([*(name for names in _HOMES.values() for name in names), "preview", "weave"])
 
 
 class _CallableModule(types.ModuleType):
-    """``xrayraster.weave``, callable: ``xr.weave(path)`` makes a sample as ``xrayraster weave`` does.
+    """A subpackage that is also its one-call function: ``xr.weave(path)`` makes a sample as
+    ``xrayraster weave`` does (beside ``xr.weave.UnitCell``, ``xr.weave.Sample``: docs/weave.md),
+    ``xr.preview(path)`` shows a file's live preview in a notebook (docs/preview.md).
 
-    ``xr.weave`` is both the subpackage (``xr.weave.UnitCell``, ``xr.weave.Sample``: docs/weave.md)
-    and the one-call pipeline beside ``xr.scan``. A module cannot be called, so its class is made
-    this subclass. It is done here: the weave layer may not import the pipeline above it, and this
-    module runs before the subpackage whichever is imported first (``import xrayraster.weave``
-    imports its parent first), so ``xr.weave`` is always callable.
+    A module cannot be called, so its class is made this subclass. It is done here: a lower layer
+    may not import the layers above it that run the call, and this module runs before the
+    subpackage whichever is imported first (``import xrayraster.weave`` imports its parent first),
+    so ``xr.weave`` and ``xr.preview`` are always callable. The function is imported on the call.
     """
 
-    def __call__(self, source, **options):
-        """:func:`xrayraster.pipeline.woven.weave`: a weave file (path or table) → ``xr.WeaveResult``."""
-        from .pipeline.woven import weave as run
-
-        return run(source, **options)
+    def __call__(self, *args, **options):
+        module, name = _CALLS[self.__name__]
+        return getattr(importlib.import_module(module), name)(*args, **options)
 
 
-weave.__class__ = _CallableModule
+_CALLS = {  # the callable subpackage → (module, function) its call runs
+    "xrayraster.weave": ("xrayraster.pipeline.woven", "weave"),  # a weave file (path or table) → xr.WeaveResult
+    "xrayraster.preview": ("xrayraster.preview.notebook", "preview"),  # a file → the page inline
+}
+weave.__class__ = preview.__class__ = _CallableModule

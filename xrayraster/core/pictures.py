@@ -43,6 +43,38 @@ class Picture:
     boxes: dict[str, Box]
 
 
+def show(array, *, window: tuple[float, float] | None = None, unit: str = "", title: str = ""):
+    """A 2-D array (a 3-D one's middle slice along its first axis) as a grey picture, row 0 at the
+    top, enlarged to about 400 pixels, with a colour bar over ``window`` (default its finite values'
+    1st to 99.5th percentile) labelled in ``unit``, and ``title`` above: a PIL image, which a
+    notebook shows inline (``xr.show``)."""
+    from PIL import Image, ImageDraw
+
+    data = np.asarray(array, dtype=np.float64)
+    if data.ndim == 3:
+        data = data[data.shape[0] // 2]
+    if data.ndim != 2 or not data.size:
+        raise ConfigError(f"show takes a 2-D array (or a 3-D stack: its middle slice), got shape {data.shape}")
+    finite = data[np.isfinite(data)]
+    if window is None:
+        low, high = (float(v) for v in np.percentile(finite, figure.WINDOW_PERCENTILES)) if finite.size else (0.0, 1.0)
+        window = (low, high) if high > low else (low - (abs(low) or 1.0), low + (abs(low) or 1.0))
+    picture = figure.enlarge(figure.grey(np.nan_to_num(data, nan=window[0]), window), max(1, 400 // max(data.shape)))
+    top = figure.line_px() + 8 if title else 6
+    bar_box, _ = figure.colour_bar(None, (0, 0), picture.shape[0], window)
+    caption = f"{unit}" if unit else ""
+    width = picture.shape[1] + 18 + max(bar_box[2], figure.text(None, (0, 0), caption)[2] if caption else 0) + 8
+    canvas = Image.new("RGB", (width, top + picture.shape[0] + figure.line_px() + 12), figure.BACKGROUND)
+    canvas.paste(Image.fromarray(np.repeat(picture[..., None], 3, axis=2)), (6, top))
+    draw = ImageDraw.Draw(canvas)
+    if title:
+        figure.text(draw, (6, 4), title)
+    figure.colour_bar(draw, (picture.shape[1] + 18, top - figure.line_px() // 2), picture.shape[0], window)
+    if caption:
+        figure.text(draw, (picture.shape[1] + 18, top + picture.shape[0] + 6), caption)
+    return canvas
+
+
 def write_slices(path, volume: np.ndarray, labels: np.ndarray, names=None, grid=None) -> Path:
     """Write :func:`slices_picture` as a PNG at ``path``, atomically; returns the path."""
     return _write(path, slices_picture(volume, labels, names, grid))

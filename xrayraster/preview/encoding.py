@@ -15,7 +15,9 @@ import struct
 
 import numpy as np
 
+from ..core.figure import PALETTE
 from .frames import Frame
+from .quick_slice import QuickSlice
 
 LEVELS = 65535
 
@@ -29,23 +31,38 @@ def quantized(image: np.ndarray) -> tuple[np.ndarray, float, float]:
 
 
 def encode(frame: Frame, request_id: int, extra: dict | None = None) -> bytes:
-    levels, lo, hi = quantized(frame.image)
     image = frame.image
-    header = {
-        "id": request_id, "shape": list(image.shape), "lo": lo, "hi": hi, "quantity": frame.quantity,
-        "unit": frame.unit, "angle_deg": frame.angle_deg, "seconds": frame.seconds,
+    return _packed(image, {
+        "id": request_id, "quantity": frame.quantity, "unit": frame.unit, "angle_deg": frame.angle_deg,
+        "seconds": frame.seconds, "layout": frame.layout,
         "stats": {"min": float(image.min()), "max": float(image.max()), "mean": float(image.mean())},
-        "layout": frame.layout,
         **(extra or {}),
-    }
-    text = json.dumps(header).encode()
+    })
+
+
+def encode_slice(cut: QuickSlice) -> bytes:
+    """A quick slice as a frame (cm⁻¹) whose levels are followed by its labels, one uint16 a voxel;
+    the header names the labels and gives the label colours of a scan's ``slices.png``."""
+    header = {"quantity": "attenuation", "unit": "1/cm", "names": {str(k): v for k, v in cut.names.items()},
+              "z_mm": cut.z_mm, "views": cut.views, "detector_shape": list(cut.detector_shape),
+              "voxel_mm": cut.voxel_mm, "seconds": cut.seconds, "palette": PALETTE.tolist()}
+    return _packed(cut.image, header) + cut.labels.astype("<u2").tobytes()
+
+
+def _packed(image: np.ndarray, header: dict) -> bytes:
+    levels, lo, hi = quantized(image)
+    text = json.dumps({**header, "shape": list(image.shape), "lo": lo, "hi": hi}).encode()
     text += b" " * ((4 + len(text)) % 2)  # the levels start at an even offset (a Uint16Array view)
     return struct.pack("<I", len(text)) + text + levels.tobytes()
 
 
 def decode(message: bytes) -> tuple[dict, np.ndarray]:
-    """The header and the float64 values of an :func:`encode`\\ d frame (what the page computes)."""
+    """The header and the float64 values of an :func:`encode`\\ d frame (what the page computes);
+    an :func:`encode_slice`\\ d slice's labels follow the values as ``header["labels"]``."""
     (length,) = struct.unpack_from("<I", message)
     header = json.loads(message[4:4 + length])
-    levels = np.frombuffer(message, "<u2", offset=4 + length).reshape(header["shape"])
-    return header, header["lo"] + levels * ((header["hi"] - header["lo"]) / LEVELS)
+    count = int(np.prod(header["shape"]))
+    words = np.frombuffer(message, "<u2", offset=4 + length)
+    if len(words) > count:
+        header["labels"] = words[count:].reshape(header["shape"])
+    return header, header["lo"] + words[:count].reshape(header["shape"]) * ((header["hi"] - header["lo"]) / LEVELS)

@@ -21,9 +21,12 @@ import numpy as np
 
 from ..core.errors import ConfigError
 from ..core.projections import Projections
+from ..gl.context import GLContext
 from ..physics.detector import Detector
+from ..recon.opencl import CLContext
 from ..simulate.renderer import Renderer
 from .document import Document, View
+from .quick_slice import QuickSlice, quick_slice
 
 #: Keys of a scan file that leave its sample as it is: a change below them meshes nothing again.
 _NOT_THE_SAMPLE = ("geometry", "source", "detector")
@@ -48,6 +51,8 @@ class Previewer:
 
     def __init__(self, threads: int | None = None):
         self.threads = threads
+        self._gl: GLContext | None = None  # owned here: the renderer and the quick slices' scans borrow it
+        self._cl = None  # the quick slices' OpenCL context, made on the first
         self._renderer: Renderer | None = None
         self._loaded = (None, None)  # (tables as JSON, SceneFile or ScanFile)
         self._sample = (None, None)  # (the sample's tables as JSON, the scene the projections see)
@@ -79,10 +84,20 @@ class Previewer:
             return renderer.path_lengths_all(scene, [0], progress=False)
         return renderer.project_all(scene, loaded.spectrum, [0], progress=False, **self._options(document, view, loaded))
 
+    def quick_slice(self, document: Document, view: View) -> QuickSlice:
+        """The middle slice of a scan file's grid from a cut-down scan, with its labels (:mod:`.quick_slice`)."""
+        self._gl = self._gl or GLContext()
+        self._cl = self._cl or CLContext()
+        return quick_slice(document, view, self.load(document), gl=self._gl, cl=self._cl, threads=self.threads)
+
     def release(self) -> None:
         if self._renderer is not None:
             self._renderer.release()
             self._renderer = None
+        for context in (self._cl, self._gl):
+            if context is not None:
+                context.release()
+        self._gl = self._cl = None
 
     # -- what changed ----------------------------------------------------------------------------
 
@@ -132,7 +147,8 @@ class Previewer:
             renderer.release()
             renderer = None
         if renderer is None:
-            renderer = self._renderer = Renderer(geometry, overlap=overlap, threads=self.threads)
+            self._gl = self._gl or GLContext()
+            renderer = self._renderer = Renderer(geometry, overlap=overlap, threads=self.threads, context=self._gl)
         elif renderer.geometry != geometry:
             renderer.retarget(geometry)
         return renderer

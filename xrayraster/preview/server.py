@@ -11,6 +11,8 @@ over a WebSocket.
   materials, and the view it opens with.
 * ``POST /save/settings.toml``, ``/save/view.tif``, ``/save/view.png``: the state in the body,
   the file to download in the answer.
+* ``POST /slice`` (scan files): the state in the body; the answer, the middle slice of the grid
+  from a cut-down scan with its labels (:mod:`.quick_slice`, :func:`.encoding.encode_slice`).
 
 Frames render one at a time on one thread that owns the GL context (:class:`~.frames.Previewer`);
 an error in a request (a bad value, a weave whose yarns do not fit) is answered, never raised, so
@@ -50,7 +52,7 @@ from ..core.errors import XrayrasterError, XrayrasterWarning
 from ..core.tiff import quicklook_path
 from .controls import controls
 from .document import OUTPUTS, Document, View
-from .encoding import encode
+from .encoding import encode, encode_slice
 from .frames import Previewer
 
 log = logging.getLogger("xrayraster")
@@ -89,7 +91,10 @@ class Preview:
                 "turns": hasattr(loaded.geometry, "angles")}
 
     def close(self) -> None:
-        self._executor.submit(self._previewer.release).result()
+        try:
+            self._executor.submit(self._previewer.release).result()
+        except RuntimeError:  # the interpreter is exiting (a notebook's server): its contexts go with it
+            return
         self._executor.shutdown()
 
 
@@ -165,9 +170,21 @@ def make_app(preview: Preview, *, host: str = "127.0.0.1", port: int = 8000, tok
         except (XrayrasterError, ValueError) as exc:
             return JSONResponse({"error": str(exc)}, status_code=400)
 
+    async def cut(request: Request):
+        refused = allowed(request.headers, request.query_params)
+        if refused:
+            return PlainTextResponse(f"refused: {refused}", status_code=403)
+        try:
+            document, view = preview.state(await request.json())
+            body = await preview.run(lambda previewer: encode_slice(previewer.quick_slice(document, view)))
+            return Response(body, media_type="application/octet-stream")
+        except (XrayrasterError, ValueError) as exc:
+            return JSONResponse({"error": str(exc)}, status_code=400)
+
     routes = [
         Route("/", page),
         Route("/save/{what:str}", save, methods=["POST"]),
+        Route("/slice", cut, methods=["POST"]),
         WebSocketRoute("/frames", frames),
         Mount("/static", app=StaticFiles(directory=str(static)), name="static"),
     ]

@@ -198,6 +198,7 @@ function setAngle(degrees, from) {
 
 function hello(message) {
   $("file").textContent = message.file;
+  $("slice-controls").hidden = message.kind !== "scan";
   Object.assign(state.view, message.view);
   if (state.view.angle_deg === null) { $("angle").disabled = $("angle-value").disabled = true; }
   else { $("angle").value = state.view.angle_deg; $("angle-value").value = state.view.angle_deg; }
@@ -252,6 +253,50 @@ async function save(what) {
   link.remove();
 }
 
+async function quickSlice() {
+  $("slice").disabled = true;
+  $("slice-caption").textContent = "reconstructing...";
+  $("slice-figure").hidden = false;
+  try {
+    const response = await fetch(`slice${query}`, {
+      method: "POST", headers: { "Content-Type": "application/json" },
+      body: JSON.stringify({ edits: state.edits, view: state.view }),
+    });
+    if (!response.ok) throw new Error(JSON.parse(await response.text()).error);
+    const buffer = await response.arrayBuffer(), cut = decodeFrame(buffer), h = cut.header;
+    const [rows, cols] = h.shape, n = rows * cols;
+    const labels = new Uint16Array(buffer, buffer.byteLength - 2 * n, n);
+    const sorted = Array.from(cut.levels).sort((a, b) => a - b);
+    const lo = value(cut, sorted[Math.floor(0.01 * n)]), hi = value(cut, sorted[Math.floor(0.99 * n)]);
+    const canvas = $("slice-image"), image = new ImageData(cols, rows), px = image.data;
+    const colour = (k) => (k > 0 ? h.palette[(k - 1) % h.palette.length] : null);  // slices.png's; air clear
+    for (let i = 0; i < n; i++) {
+      let g = Math.round(255 * (value(cut, cut.levels[i]) - lo) / Math.max(hi - lo, 1e-12));
+      g = Math.min(255, Math.max(0, g));
+      const c = colour(labels[i]);
+      for (let k = 0; k < 3; k++) px[4 * i + k] = c ? Math.round(0.65 * g + 0.35 * c[k]) : g;  // slices.png's overlay
+      px[4 * i + 3] = 255;
+    }
+    canvas.width = cols;
+    canvas.height = rows;
+    canvas.getContext("2d").putImageData(image, 0, 0);
+    $("slice-caption").textContent = `z = ${h.z_mm.toFixed(3)} mm: ${h.views} views of ${h.detector_shape.join(" × ")} ` +
+      `px, ${h.voxel_mm.toPrecision(3)} mm voxels, ${h.seconds.toFixed(1)} s; grey ${lo.toPrecision(3)} to ` +
+      `${hi.toPrecision(3)} 1/cm`;
+    $("slice-legend").innerHTML = Object.entries(h.names).filter(([k]) => k !== "0").map(([k, name]) => {
+      const c = colour(Number(k));
+      return `<span><i style="background: rgb(${c.join(",")})"></i>${k} ${name}</span>`;
+    }).join(" ");
+    preview.slice = { header: h, labels: Array.from(labels) };
+  } catch (error) {
+    $("slice-caption").textContent = "";
+    $("error").textContent = String(error.message || error);
+    $("error").hidden = false;
+  } finally {
+    $("slice").disabled = false;
+  }
+}
+
 function start() {
   socket = new WebSocket(`${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/frames${query}`);
   socket.binaryType = "arraybuffer";
@@ -272,6 +317,7 @@ function start() {
   $("window").addEventListener("input", fromWindowSliders);
   $("auto").addEventListener("click", () => { win.auto = true; autoWindow(); paint(); histogram(); });
   $("save-settings").addEventListener("click", () => save("settings.toml"));
+  $("slice").addEventListener("click", quickSlice);
   $("save-view").addEventListener("click", () => { save("view.tif"); save("view.png"); });
   const canvas = $("image");
   let drag = null;
