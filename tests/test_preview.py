@@ -12,7 +12,6 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import socket
 import time
 from pathlib import Path
 
@@ -31,6 +30,7 @@ from xrayraster.io.scene_file import load_scene_file  # noqa: E402
 from xrayraster.preview.document import Document, View  # noqa: E402
 from xrayraster.preview.encoding import LEVELS, decode, encode  # noqa: E402
 from xrayraster.preview.frames import Frame, Previewer, turned  # noqa: E402
+from xrayraster.preview.notebook import free_port  # noqa: E402
 from xrayraster.preview.server import Background, Preview, make_app  # noqa: E402
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
@@ -120,10 +120,18 @@ def test_bad_views_are_named(view, message):
         View.from_dict(view)
 
 
-def test_a_weave_file_is_refused_with_the_way_to_preview_it(tmp_path):
+def test_a_weave_file_previews_as_the_scan_file_it_saves_as(tmp_path, previewer):
+    from xrayraster.io.weave_file import DEFAULT_SOURCE
+    from xrayraster.pipeline import load_scan_file
+    import tomli_w
+
     shutil.copy(EXAMPLES / "weave.toml", tmp_path / "weave.toml")
-    with pytest.raises(ConfigError, match=r"put its tables under a scan file's \[weave\] table"):
-        Document.open(tmp_path / "weave.toml")
+    document = Document.open(tmp_path / "weave.toml")
+    assert document.kind == "scan" and document.table["source"] == DEFAULT_SOURCE
+    saved = tmp_path / "scan.toml"
+    saved.write_text(tomli_w.dumps(document.saved(View(angle_deg=20.0))))
+    loaded = load_scan_file(saved)  # a scan file `xrayraster scan` takes
+    assert loaded.weave is not None and loaded.geometry.angles[0] == pytest.approx(np.radians(20.0))
 
 
 def test_saved_settings_render_to_the_frame_on_screen(scene_file, previewer, tmp_path):
@@ -181,6 +189,45 @@ def test_the_server_answers_frames_and_errors_and_keeps_serving(scene_file, gl):
         assert bad.status_code == 400 and "no key 'mass'" in bad.json()["error"]
         refused = c.post("/slice", json={"edits": {}, "view": {}})
         assert refused.status_code == 400 and "a slice needs a scan file" in refused.json()["error"]
+
+
+def test_a_page_gone_mid_frame_leaves_the_server_serving(scene_file, gl):
+    with client(scene_file) as c:
+        with c.websocket_connect("ws://127.0.0.1:8000/frames") as ws:
+            view = ws.receive_json()["view"]
+            ws.send_text(json.dumps({"id": 1, "edits": {}, "view": view}))
+        with c.websocket_connect("ws://127.0.0.1:8000/frames") as ws:  # the next page
+            view = ws.receive_json()["view"]
+            ws.send_text(json.dumps({"id": 2, "edits": {}, "view": {**view, "angle_deg": 5.0}}))
+            header, _ = decode(ws.receive_bytes())
+            assert header["id"] == 2 and header["angle_deg"] == pytest.approx(5.0)
+
+
+def test_beyond_loopback_it_warns_and_every_request_needs_the_token(scene_file):
+    from xrayraster.core.errors import XrayrasterWarning
+    from xrayraster.preview.server import _server
+
+    with pytest.warns(XrayrasterWarning, match="beyond this machine's loopback"):
+        server, preview, url = _server(scene_file, "0.0.0.0", 8000, 1)
+    preview.close()
+    assert url.startswith("http://0.0.0.0:8000/?token=") and len(url.split("=", 1)[1]) >= 20
+
+
+def test_ctrl_c_stops_the_server_with_status_130(scene_file):
+    import signal
+    import subprocess
+    import sys
+
+    process = subprocess.Popen([sys.executable, "-m", "xrayraster", "preview", str(scene_file), "--port",
+                                str(free_port())], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = process.stdout.readline()
+        assert line.startswith(f"preview of {scene_file} at http://127.0.0.1:"), line
+        process.send_signal(signal.SIGINT)
+        assert process.wait(timeout=30) == 130
+        assert "interrupted" in process.stderr.read()
+    finally:
+        process.kill()
 
 
 def test_other_origins_hosts_and_missing_tokens_are_refused(scene_file, gl):
@@ -283,12 +330,6 @@ def test_xr_preview_serves_the_page_once_per_file(scene_file, gl):
 # -- the page in a browser ---------------------------------------------------------------------
 
 TIMEOUT_S = 60
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def wait_for(condition, what: str):

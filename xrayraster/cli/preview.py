@@ -10,7 +10,8 @@ from .options import positive_int
 
 def add_parser(subparsers) -> None:
     preview = subparsers.add_parser("preview", help="tune a scan by looking at its radiographs, live, in a web page")
-    preview.add_argument("file", type=Path, help="scene file (docs/scene-format.md) or scan file (docs/scan.md)")
+    preview.add_argument("file", type=Path, help="scene file (docs/scene-format.md), scan file (docs/scan.md) or "
+                         "weave file (docs/weave.md: scanned with the tube xrayraster weave gives its scene file)")
     preview.add_argument("--host", default="127.0.0.1",
                          help="address to listen on (default 127.0.0.1: this machine only; reach it over SSH with "
                               "ssh -L 8000:127.0.0.1:8000). Any other needs the printed address's token")
@@ -21,7 +22,7 @@ def add_parser(subparsers) -> None:
 
 
 def run(args) -> int:
-    for module in ("starlette", "uvicorn", "websockets", "tomli_w"):
+    for module in ("starlette", "uvicorn", "websockets"):
         optional_module(module, "preview", "xrayraster preview")
     from ..preview.server import serve
 

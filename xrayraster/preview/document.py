@@ -1,7 +1,8 @@
-"""The file a preview shows: a scene file or a scan file as its TOML tables, edited key by key
+"""The file a preview shows: a scene, scan or weave file as its TOML tables, edited key by key
 (dotted keys, as a dataset's ``[vary]`` names them: ``source.kvp``, ``weave.sample.seed``), checked
 by the file's own loader, and written back as a TOML file that ``xrayraster render`` (a scene
-file) or ``xrayraster scan`` and ``build`` (a scan file) take unchanged.
+file) or ``xrayraster scan`` and ``build`` (a scan file) take unchanged. A weave file is previewed
+as the scan file it makes with ``xrayraster weave``'s tube (``DEFAULT_SOURCE``), and saved as one.
 
 The view options that are not keys of the file (the angle, what is shown, the noise of a scene
 file's radiograph) live in :class:`View`; a saved file carries the angle as its first view, so
@@ -19,6 +20,7 @@ from pathlib import Path
 from ..core.choices import RADIOGRAPH_OUTPUTS
 from ..core.errors import ConfigError
 from ..io.scene_file import load_scene_file, read_toml
+from ..io.weave_file import DEFAULT_SOURCE
 from ..pipeline.scan_file import load_scan_file
 from ..pipeline.scan_keys import absolute_paths, check_key, set_key
 
@@ -73,12 +75,17 @@ class Document:
         path = Path(path)
         data = read_toml(path, "preview file")
         if "weave" in data and set(data) <= {"weave", "materials"}:
-            raise ConfigError(f"{path}: a weave file has no scanner to preview it with; put its tables under a scan "
-                              "file's [weave] table (docs/scan.md) and preview that")
+            # A weave file is a scan file without a tube: the scan of `xrayraster weave`'s scene file
+            # (its framing geometry is a scan file's default for a weave), which saving makes a scan file.
+            data["source"] = dict(DEFAULT_SOURCE)
         kind = "scan" if SCAN_TABLES & set(data) else "scene"
-        document = cls(path, kind, absolute_paths(data, path.resolve().parent))
-        document.load()  # a bad file fails before a server starts
-        return document
+        table = absolute_paths(data, path.resolve().parent)
+        loaded = cls(path, kind, table).load()  # a bad file fails before a server starts
+        if "geometry" not in table:
+            # A weave's scan frames the sample by default; the preview's scanner stays where it was
+            # framed when the sample changes, as a real one does, and its keys can be edited and saved.
+            table = {**table, "geometry": loaded.geometry.to_dict()}
+        return cls(path, kind, table)
 
     def load(self):
         """The file as its loader reads it (``SceneFile`` or ``ScanFile``); ConfigError naming the key."""
@@ -115,7 +122,7 @@ class Document:
         """The tables to save for ``view``: its angle as the first view's (``start_angle_deg``, or
         the ``angles_deg`` turned with it) and, for a scan file, its noise and seed."""
         table = copy.deepcopy(self.table)
-        geometry = table.get("geometry", {})
+        geometry = table["geometry"]
         if view.angle_deg is not None and "vectors" not in geometry:
             if "angles_deg" in geometry:
                 turn = view.angle_deg - geometry["angles_deg"][0]
