@@ -58,22 +58,21 @@ class Previewer:
         self._sample = (None, None)  # (the sample's tables as JSON, the scene the projections see)
 
     def frame(self, document: Document, view: View) -> Frame:
+        """View 0 of ``document`` as ``view`` shows it (ConfigError naming the key of a bad value)."""
         start = time.perf_counter()
         loaded, scene, renderer = self._prepare(document, view)
-        geometry = renderer.geometry
         prepared = time.perf_counter()
         if view.output == "path_length":
             image = renderer.path_lengths(scene, 0)[view.material]
             seconds = {"path_lengths": time.perf_counter() - prepared}
-            quantity, unit = f"path length: {_name(scene.materials[view.material])}", "mm"
+            quantity, unit = f"path length: {material_names(scene)[view.material]}", "mm"
         else:
             options = self._options(document, view, loaded)
             shot = renderer.project(scene, loaded.spectrum, 0, **options)
             image, seconds = shot.image, dict(renderer.last_seconds)
             quantity = view.output
             unit = "1" if view.output != "raw" else "counts" if options["detector"].counting else "keV deposited"
-        angle = math.degrees(geometry.angles[0]) if hasattr(geometry, "angles") else None
-        return Frame(image, quantity, unit, angle, {"prepare": prepared - start, **seconds},
+        return Frame(image, quantity, unit, first_angle_deg(renderer.geometry), {"prepare": prepared - start, **seconds},
                      layout(renderer.vector_geometry, scene.bounds))
 
     def projections(self, document: Document, view: View) -> Projections:
@@ -154,6 +153,11 @@ class Previewer:
         return renderer
 
 
+def first_angle_deg(geometry) -> float | None:
+    """The angle of a circular scan's first view, degrees (None for per-view vectors)."""
+    return math.degrees(geometry.angles[0]) if hasattr(geometry, "angles") else None
+
+
 def turned(geometry, angle_deg: float | None):
     """``geometry`` turned so its first view is at ``angle_deg`` (its views keep their spacing);
     as it is for None or a per-view vector geometry, which has no angle to turn."""
@@ -164,8 +168,9 @@ def turned(geometry, angle_deg: float | None):
     return dataclasses.replace(geometry, angles=tuple(first + (a - start) for a in geometry.angles))
 
 
-def _name(material) -> str:
-    return getattr(material, "name", str(material))
+def material_names(scene) -> list[str]:
+    """The names of ``scene``'s materials, in channel order."""
+    return [getattr(m, "name", str(m)) for m in scene.materials]
 
 
 def layout(vector_geometry, bounds) -> dict:

@@ -46,7 +46,7 @@ def quick_table(document: Document, view: View, loaded) -> dict:
         raise ConfigError(f"{document.path}: a slice needs a scan file (a volume grid and a sample); this is a "
                           "scene file")
     table = document.saved(view)
-    geometry, old = table.setdefault("geometry", {}), loaded.geometry
+    geometry, old = table["geometry"], loaded.geometry
     if "vectors" in geometry:
         raise ConfigError(f"{document.path}: a quick slice bins a circular scan's detector; this file gives "
                           "per-view vectors")
@@ -89,5 +89,6 @@ def _largest_magnification(geometry, grid) -> float:
     if not hasattr(geometry, "source_to_origin"):
         return 1.0
     _, ny, nx = grid.shape
-    radius = math.hypot(ny * grid.voxel_size[1] / 2 + abs(grid.offset[1]), nx * grid.voxel_size[2] / 2 + abs(grid.offset[2]))
+    radius = math.hypot(ny * grid.voxel_size[1] / 2 + abs(grid.offset[1]),
+                        nx * grid.voxel_size[2] / 2 + abs(grid.offset[2]))
     return geometry.source_to_detector / max(geometry.source_to_origin - radius, 1e-3 * geometry.source_to_origin)

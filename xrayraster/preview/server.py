@@ -27,7 +27,6 @@ import asyncio
 import hmac
 import json
 import logging
-import math
 import secrets
 import tempfile
 import threading
@@ -53,7 +52,7 @@ from ..core.tiff import quicklook_path
 from .controls import controls
 from .document import OUTPUTS, Document, View
 from .encoding import encode, encode_slice
-from .frames import Previewer
+from .frames import Previewer, first_angle_deg, material_names
 
 log = logging.getLogger("xrayraster")
 
@@ -82,13 +81,12 @@ class Preview:
 
     def hello(self, previewer: Previewer) -> dict:
         loaded = previewer.load(self.document)
-        materials = [getattr(m, "name", str(m)) for m in previewer.scene(self.document, loaded).materials]
+        materials = material_names(previewer.scene(self.document, loaded))
         view = self.document.initial_view()
         return {"type": "hello", "file": self.document.path.name, "kind": self.document.kind,
                 "controls": controls(self.document, loaded), "outputs": list(OUTPUTS), "materials": materials,
                 "view": {"output": view.output, "noise": view.noise, "seed": view.seed,
-                         "angle_deg": _first_angle(loaded.geometry)},
-                "turns": hasattr(loaded.geometry, "angles")}
+                         "angle_deg": first_angle_deg(loaded.geometry)}}
 
     def close(self) -> None:
         try:
@@ -103,27 +101,29 @@ def make_app(preview: Preview, *, host: str = "127.0.0.1", port: int = 8000, tok
     static = resources.files("xrayraster.preview") / "static"
     hosts = {f"{h}:{port}" for h in (*LOOPBACK, "[::1]", host)}
 
-    def allowed(scope_headers: dict, query: dict) -> str | None:
-        """Why a request is refused (None: it is not)."""
-        if scope_headers.get("host") not in hosts:
+    def refused(connection) -> str | None:
+        """Why a request (or WebSocket) is refused: None when it is not."""
+        headers, query = connection.headers, connection.query_params
+        if headers.get("host") not in hosts:
             return "unknown host"
-        origin = scope_headers.get("origin")
-        if origin is not None and urlsplit(origin).netloc != scope_headers.get("host"):
+        origin = headers.get("origin")
+        if origin is not None and urlsplit(origin).netloc != headers.get("host"):
             return "cross-origin request"
         if token is not None and not hmac.compare_digest(query.get("token", ""), token):
             return "missing or wrong token"
         return None
 
+    def refusal(request: Request) -> Response | None:
+        why = refused(request)
+        return None if why is None else PlainTextResponse(f"refused: {why}", status_code=403)
+
     async def page(request: Request):
-        refused = allowed(request.headers, request.query_params)
-        if refused:
-            return PlainTextResponse(f"refused: {refused}", status_code=403)
-        return FileResponse(str(static / "index.html"))
+        return refusal(request) or FileResponse(str(static / "index.html"))
 
     async def frames(ws: WebSocket):
-        refused = allowed(ws.headers, ws.query_params)
-        if refused:
-            await ws.close(code=1008, reason=refused)
+        why = refused(ws)
+        if why is not None:
+            await ws.close(code=1008, reason=why)
             return
         await ws.accept()
         await ws.send_json(await preview.run(preview.hello))
@@ -153,9 +153,8 @@ def make_app(preview: Preview, *, host: str = "127.0.0.1", port: int = 8000, tok
             listener.cancel()
 
     async def save(request: Request):
-        refused = allowed(request.headers, request.query_params)
-        if refused:
-            return PlainTextResponse(f"refused: {refused}", status_code=403)
+        if (answer := refusal(request)) is not None:
+            return answer
         what = request.path_params["what"]
         if what not in SAVES:
             return PlainTextResponse(f"no such file: {what} (one of {', '.join(SAVES)})", status_code=404)
@@ -171,9 +170,8 @@ def make_app(preview: Preview, *, host: str = "127.0.0.1", port: int = 8000, tok
             return JSONResponse({"error": str(exc)}, status_code=400)
 
     async def cut(request: Request):
-        refused = allowed(request.headers, request.query_params)
-        if refused:
-            return PlainTextResponse(f"refused: {refused}", status_code=403)
+        if (answer := refusal(request)) is not None:
+            return answer
         try:
             document, view = preview.state(await request.json())
             body = await preview.run(lambda previewer: encode_slice(previewer.quick_slice(document, view)))
@@ -223,10 +221,6 @@ def _saved_view(previewer: Previewer, document: Document, view: View, what: str)
 
 def _download(body, name: str, media_type: str) -> Response:
     return Response(body, media_type=media_type, headers={"Content-Disposition": f'attachment; filename="{name}"'})
-
-
-def _first_angle(geometry) -> float | None:
-    return math.degrees(geometry.angles[0]) if hasattr(geometry, "angles") else None
 
 
 def serve(path, *, host: str = "127.0.0.1", port: int = 8000, open_browser: bool = False,
