@@ -1,7 +1,7 @@
 """The preview: documents edited and saved, frames against the renderer and the command line, the
 frame encoding, the server's answers and refusals (Starlette's test client), and the page in a
 real headless browser (Debian's Chromium, driven by Selenium): the image follows the angle slider
-and is the renderer's view at that angle, window and level paint what they say, a bad value shows
+and a drag on the image, and is the renderer's view at that angle, window and level paint what they say, a bad value shows
 its error and keeps the last good image, and the saved settings render with `xrayraster render`
 to the frame on screen.
 
@@ -369,6 +369,7 @@ def within_a_level(header: dict, values: np.ndarray, expected: np.ndarray) -> No
 
 
 def test_the_page_turns_paints_reports_errors_and_saves_what_render_renders(browser, scene_file, tmp_path):
+    from selenium.webdriver.common.action_chains import ActionChains
     from selenium.webdriver.common.by import By
     from selenium.webdriver.common.keys import Keys
 
@@ -389,6 +390,15 @@ def test_the_page_turns_paints_reports_errors_and_saves_what_render_renders(brow
         header, turned = shown(browser)
         assert np.abs(turned - first).max() > 0.01  # the picture changed
         within_a_level(header, turned, reference(scene_file, 1.0))
+
+        # Dragging the image sideways turns the sample half a degree a screen pixel.
+        canvas = browser.find_element(By.ID, "image")
+        ActionChains(browser).move_to_element(canvas).click_and_hold().move_by_offset(8, 0).release().perform()
+        wait_for(lambda: shown(browser)[0]["angle_deg"] == pytest.approx(5.0), "the frame at 1° + 8 × 0.5°")
+        header, dragged = shown(browser)
+        within_a_level(header, dragged, reference(scene_file, 5.0))
+        slider.send_keys(*[Keys.ARROW_LEFT] * 16)  # back to 1° in steps of 0.25°
+        wait_for(lambda: shown(browser)[0]["angle_deg"] == pytest.approx(1.0), "the frame at 1° again")
 
         # What is painted is the frame through the page's window and level (auto: 0.5-99.5 %).
         window = browser.execute_script("return xrPreview.window;")
