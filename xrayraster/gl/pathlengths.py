@@ -121,12 +121,13 @@ class PathLengthRenderer:
         starts a new crossing engine on the same context."""
         vector_geometry = as_vector_geometry(geometry)
         render_vec = _refine(vector_geometry, self.supersampling)
-        if render_vec.detector_shape != self._render_vec.detector_shape:
+        new_shape = render_vec.detector_shape != self._render_vec.detector_shape
+        self.geometry, self.vector_geometry, self._render_vec = geometry, vector_geometry, render_vec
+        if new_shape:  # checked before the engine's buffers are made, as in __init__
+            self._check_size()
             self.engine.release()
             self.engine = CrossingEngine(render_vec, self.gl, self.small_triangle_pixels)
-        self.geometry, self.vector_geometry, self._render_vec = geometry, vector_geometry, render_vec
         self.engine.geometry = render_vec
-        self._check_size()
 
     def release(self) -> None:
         if self.gl is None:

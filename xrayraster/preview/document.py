@@ -111,10 +111,11 @@ class Document:
                 set_key(table, key, value)
         return Document(self.path, self.kind, table)
 
-    def initial_view(self) -> View:
-        """The view a page opens with: a scan file's own noise and seed (its scan's defaults)."""
+    def initial_view(self, loaded=None) -> View:
+        """The view a page opens with: a scan file's own noise and seed (its scan's defaults).
+        ``loaded``: the file as :meth:`load` reads it, when at hand."""
         if self.kind == "scan":
-            options = self.load().options
+            options = (loaded or self.load()).options
             return View(noise=options.noise, seed=options.seed)
         return View()
 

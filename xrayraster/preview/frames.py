@@ -28,7 +28,7 @@ from ..simulate.renderer import Renderer
 from .document import Document, View
 from .quick_slice import QuickSlice, quick_slice
 
-#: Keys of a scan file that leave its sample as it is: a change below them meshes nothing again.
+#: Tables that leave the sample as it is: a change below them meshes or uploads nothing again.
 _NOT_THE_SAMPLE = ("geometry", "source", "detector")
 
 
@@ -129,13 +129,13 @@ class Previewer:
         return self._loaded[1]
 
     def scene(self, document: Document, loaded):
-        """The scene the projections see: a scene file's objects, or a scan file's sample (meshed
-        again only when its tables changed) with its mount."""
-        if document.kind == "scene":
-            return loaded.scene
+        """The scene the projections see: a scene file's objects, or a scan file's sample with its
+        mount; the one kept from before while its tables are unchanged (not meshed, not uploaded
+        to GL again)."""
         key = json.dumps({k: v for k, v in document.table.items() if k not in _NOT_THE_SAMPLE}, sort_keys=True)
         if self._sample[0] != key:
-            self._sample = (key, loaded.with_mount(loaded.sample_scene()))
+            scene = loaded.scene if document.kind == "scene" else loaded.with_mount(loaded.sample_scene())
+            self._sample = (key, scene)
         return self._sample[1]
 
     def _renderer_for(self, geometry, document: Document) -> Renderer:

@@ -82,7 +82,7 @@ class Preview:
     def hello(self, previewer: Previewer) -> dict:
         loaded = previewer.load(self.document)
         materials = material_names(previewer.scene(self.document, loaded))
-        view = self.document.initial_view()
+        view = self.document.initial_view(loaded)
         return {"type": "hello", "file": self.document.path.name, "kind": self.document.kind,
                 "controls": controls(self.document, loaded), "outputs": list(OUTPUTS), "materials": materials,
                 "view": {"output": view.output, "noise": view.noise, "seed": view.seed,

@@ -11,7 +11,7 @@ const query = token ? `?token=${encodeURIComponent(token)}` : "";
 const state = { edits: {}, view: { output: "lineint", material: 0, noise: false, seed: 0, angle_deg: null } };
 // window.xrPreview, read by tests and scripts/bench_preview.py: the frame shown, frames painted, and
 // each painted frame's latency from the first input event it answers to its paint (ms).
-const preview = { state, frame: null, painted: 0, errors: 0, window: null, latencies: [] };
+const preview = { state, frame: null, painted: 0, window: null, latencies: [] };
 window.xrPreview = preview;
 let socket = null, nextId = 1, inFlight = null, pending = false, inputAt = {}, firstInput = null;
 let win = { level: 0, width: 1, auto: true };
@@ -44,7 +44,6 @@ function received(event) {
     const message = JSON.parse(event.data);
     if (message.type === "hello") return hello(message);
     done(message.id);
-    preview.errors++;
     $("error").textContent = message.error;  // the last good image stays
     $("error").hidden = false;
     return;
