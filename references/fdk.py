@@ -153,9 +153,10 @@ class _View:
         if cone:
             self.D = float(self.n @ (self.d - self.s))
             self.R = math.hypot(self.s[0], self.s[1])
+            self.S = float(np.linalg.norm(self.s))  # the source's distance from the isocentre (RTK's scaling)
             self.theta = math.atan2(self.s[0], -self.s[1]) % (2 * math.pi)  # s_xy = R·(sin θ, −cos θ)
         else:
-            self.D = self.R = 1.0
+            self.D = self.R = self.S = 1.0
             self.theta = math.atan2(-self.s[0], self.s[1]) % (2 * math.pi)  # r_xy ∝ (−sin θ, cos θ)
 
     def pixel_centres(self, rows: np.ndarray, cols: np.ndarray, shape) -> np.ndarray:
@@ -462,5 +463,5 @@ def fdk_reference(projections, geometry, volume, window="ram-lak", cutoff=1.0, s
     out = np.zeros(volume.shape)
     for q, view, cell in zip(filtered, views, cells):
         row, col, w = view.detector_coordinates(x, shape)
-        out += cell * view.R / view.D / w**2 * bilinear(q, row, col + before)
+        out += cell * view.S / view.D / w**2 * bilinear(q, row, col + before)
     return out

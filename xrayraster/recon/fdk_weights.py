@@ -26,7 +26,8 @@ For view i with source ``s``, detector centre ``d`` and pixel steps ``u`` (colum
   ``P`` of :attr:`FDKViews.matrices`: ``(col·w, row·w, w) = P·(i, j, k, 1)`` in voxel indices,
   where ``w = n·(x − s) / D`` is the voxel's depth relative to the detector (1 for parallel
   beams). It adds ``scale_i / w² · q_i(row, col)`` with bilinear interpolation (zero outside the
-  detector), ``scale_i = Δθ·R / D`` (cone) or ``Δθ`` (parallel).
+  detector), ``scale_i = Δθ·|s| / D`` (cone; ``|s|`` is the source's distance from the origin,
+  the isocentre: R unless the source sits above or below it) or ``Δθ`` (parallel).
 
 With the ramp in physical detector units this is FDK's formula on the virtual detector through
 the axis: ``f(x) = Σ_i Δθ·(R²/U²)·q_virtual = Σ_i Δθ·(R·D/U²)·q_detector`` with ``U = w·D``,
@@ -96,7 +97,7 @@ class FDKViews:
     redundancy: np.ndarray  # (views, cols): W of the module docstring
     pixel_pitch: float  # |u|, mm: the ramp filter's sample spacing
     matrices: np.ndarray  # (views, 3, 4): voxel index (i, j, k, 1) -> (col·w, row·w, w)
-    scale: np.ndarray  # (views,): Δθ·R/D (cone) or Δθ (parallel)
+    scale: np.ndarray  # (views,): Δθ·|s|/D (cone) or Δθ (parallel)
     scan: str  # "full" or "short"
     displaced: bool  # Wang weights applied (full scan, laterally displaced detector)
     # Virtual columns before column 0 and after the last: the filtered rows continue there. A
@@ -162,7 +163,10 @@ def fdk_views(geometry, volume: VolumeGeometry, scan: str = "auto", displaced="a
         radius = np.hypot(s[:, 0], s[:, 1])  # R
         if np.any(radius <= 0):
             raise GeometryError("vectors: a cone-beam source lies on the rotation axis (z); FDK needs R > 0")
-        scale = gaps * radius / depth
+        # |s|, not R: a source above or below the isocentre (the origin) is scaled by its distance
+        # from it, as RTK does (Rit and Clackdoyle 2014), which cancels FDK's drop off the source's
+        # plane at the isocentre's height, where a scan centres its object (docs/reconstruction.md).
+        scale = gaps * np.linalg.norm(s, axis=1) / depth
         toward_axis = np.column_stack([-s[:, :2] / radius[:, None], np.zeros(len(a))])
     else:
         depth = np.ones(len(a))
