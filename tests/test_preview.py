@@ -74,15 +74,19 @@ def test_a_frame_is_the_renderers_view_at_that_angle(scene_file, previewer):
     np.testing.assert_array_equal(noisy.image, reference(scene_file, 12.0, output="transmission", noise=True, seed=7))
 
 
-def test_turning_keeps_the_uploaded_scene_and_a_new_spectrum_keeps_the_renderer(scene_file, previewer):
+def test_turning_keeps_the_uploaded_scene_and_a_new_tube_reads_no_mesh_again(scene_file, previewer):
     document = Document.open(scene_file)
     previewer.frame(document, View(angle_deg=0.0))
     renderer = previewer._renderer
     uploaded = renderer.engine._scene
     previewer.frame(document, View(angle_deg=90.0))
     assert previewer._renderer is renderer and renderer.engine._scene is uploaded  # no mesh upload
-    previewer.frame(document.edited({"source.kvp": 60.0}), View(angle_deg=90.0))
+    scene = previewer.load(document).scene
+    tube = document.edited({"source.kvp": 60.0, "geometry.source_to_origin": 150.0})
+    previewer.frame(tube, View(angle_deg=90.0))
     assert previewer._renderer is renderer
+    assert previewer.load(tube).scene is scene  # the scanner changed: no mesh read from the file again
+    assert previewer.load(tube.edited({"objects.0.priority": 5.0})).scene is not scene
 
 
 def test_path_length_frames_show_one_material(scene_file, previewer):
@@ -326,6 +330,37 @@ def test_xr_preview_serves_the_page_once_per_file(scene_file, gl):
     finally:
         _RUNNING.pop(str(scene_file.resolve())).stop()
 
+
+
+def test_xr_preview_of_a_scene_in_memory_shows_the_scene_file_it_writes(tmp_path, gl, previewer):
+    """``xr.preview(scene)`` writes the scene as a scene file (framed about the axis, the weave
+    files' tube) into a new folder and serves it: a frame of that file is the in-memory scene's
+    radiograph bit for bit, the framing keeps the whole scene inside the detector (the border is
+    empty), a folder in use is refused, and the scene's options are refused for a file."""
+    import trimesh
+
+    from xrayraster.preview.notebook import _RUNNING
+
+    scene = xr.Scene()
+    scene.add(trimesh.creation.box((4.0, 3.0, 2.0)), xr.Material.named("aluminium"), name="plate",
+              transform=xr.Transform.translation((1.0, 0.5, 0.3)))
+    scene.add(trimesh.creation.icosphere(2, radius=1.0), xr.Material.named("steel"), priority=1, name="ball")
+    xr.preview(scene, directory=tmp_path / "view")
+    path = tmp_path / "view" / "scene.toml"
+    try:
+        loaded = load_scene_file(path)
+        frame = previewer.frame(Document.open(path), View(angle_deg=20.0))
+        with xr.Renderer(turned(loaded.geometry, 20.0), threads=1) as renderer:
+            expected = renderer.project(scene, loaded.spectrum, 0).image
+        np.testing.assert_array_equal(frame.image, expected)
+        assert expected.max() > 0.1 and not np.concatenate([expected[[0, -1]].ravel(), expected[:, [0, -1]].ravel()]).any()
+        assert "40 kVp, W anode at 12°, filters: Al 2 mm, 1.25 mAs" in loaded.spectrum.description
+    finally:
+        _RUNNING.pop(str(path.resolve())).stop()
+    with pytest.raises(ConfigError, match="is not an empty folder"):
+        xr.preview(scene, directory=tmp_path / "view")
+    with pytest.raises(ConfigError, match="geometry, source and directory are for an xr.Scene"):
+        xr.preview(path, geometry=loaded.geometry)
 
 # -- the page in a browser ---------------------------------------------------------------------
 

@@ -82,11 +82,14 @@ def read_toml(path: Path, kind: str) -> dict:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from None
 
 
-def load_scene_file(source, *, where: str = "scene table", base_dir=None) -> SceneFile:
+def load_scene_file(source, *, where: str = "scene table", base_dir=None,
+                    objects_of: SceneFile | None = None) -> SceneFile:
     """Read and check a scene file, or the dict of one already parsed (the preview's edited table):
     then ``where`` names it in messages and as the result's ``path``, and mesh and spectrum files
-    are relative to ``base_dir`` (default: the current directory). Errors are ConfigErrors naming
-    the file (or ``where``), the table and the key."""
+    are relative to ``base_dir`` (default: the current directory). ``objects_of``: a file loaded
+    before from the same ``[[objects]]`` and ``[materials]`` (the preview, when only the scanner's
+    tables changed), whose scene and materials are taken as they are, no mesh read again. Errors are
+    ConfigErrors naming the file (or ``where``), the table and the key."""
     if isinstance(source, Mapping):
         path, data, base = Path(where), source, Path(base_dir if base_dir is not None else ".")
     else:
@@ -98,6 +101,21 @@ def load_scene_file(source, *, where: str = "scene table", base_dir=None) -> Sce
     if not isinstance(data["geometry"], dict):
         raise ConfigError(f"{path}: geometry must be a table ([geometry]), got {data['geometry']!r}")
     geometry = _geometry(data["geometry"], f"{path} [geometry]")
+    if objects_of is not None:
+        scene, materials = objects_of.scene, objects_of.materials
+    else:
+        scene, materials = _objects(data, base, path)
+    spectrum = None
+    if "source" in data:
+        spectrum = _source(fields.table(data["source"], "source", f"{path}"), base, f"{path} [source]")
+    detector = None
+    if "detector" in data:
+        detector = _detector(fields.table(data["detector"], "detector", f"{path}"), materials, f"{path} [detector]")
+    return SceneFile(path, geometry, scene, materials, spectrum, detector, _realism(data, geometry, path))
+
+
+def _objects(data: dict, base: Path, path: Path) -> tuple[Scene, dict | None]:
+    """The ``[[objects]]`` as a scene, and the materials they and the detector may name."""
     materials = None
     if "materials" in data:
         materials = _materials(data["materials"], f"{path} [materials]")
@@ -115,13 +133,7 @@ def load_scene_file(source, *, where: str = "scene table", base_dir=None) -> Sce
         _add_object(scene, spec, base, where, materials, library)
     if library and (materials is not None or all(isinstance(o.material, Material) for o in scene.objects)):
         materials = {**library, **(materials or {})}
-    spectrum = None
-    if "source" in data:
-        spectrum = _source(fields.table(data["source"], "source", f"{path}"), base, f"{path} [source]")
-    detector = None
-    if "detector" in data:
-        detector = _detector(fields.table(data["detector"], "detector", f"{path}"), materials, f"{path} [detector]")
-    return SceneFile(path, geometry, scene, materials, spectrum, detector, _realism(data, geometry, path))
+    return scene, materials
 
 
 def _add_object(scene: Scene, spec: dict, base: Path, where: str, materials: dict | None = None,

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,6 +27,8 @@ from ..pipeline.scan_keys import absolute_paths, check_key, set_key
 
 #: Tables only a scan file has: a file with none of them is a scene file (``xrayraster render``'s).
 SCAN_TABLES = {"weave", "volume", "scan", "pose", "mount"}
+#: Tables that leave the sample as it is: a change below them meshes or uploads nothing again.
+SCANNER_TABLES = ("geometry", "source", "detector")
 #: What a frame shows: a radiograph quantity, or the path length (mm) through one material.
 OUTPUTS = (*RADIOGRAPH_OUTPUTS, "path_length")
 
@@ -87,12 +90,18 @@ class Document:
             table = {**table, "geometry": loaded.geometry.to_dict()}
         return cls(path, kind, table)
 
-    def load(self):
-        """The file as its loader reads it (``SceneFile`` or ``ScanFile``); ConfigError naming the key."""
+    def load(self, objects_of=None):
+        """The file as its loader reads it (``SceneFile`` or ``ScanFile``); ConfigError naming the key.
+        ``objects_of``: a scene file's load with the same objects and materials, reused as it is."""
         base = self.path.resolve().parent
         if self.kind == "scan":
             return load_scan_file(self.table, where=str(self.path), base_dir=base)
-        return load_scene_file(self.table, where=str(self.path), base_dir=base)
+        return load_scene_file(self.table, where=str(self.path), base_dir=base, objects_of=objects_of)
+
+    def sample_key(self) -> str:
+        """The tables below the sample (all but the scanner's :data:`SCANNER_TABLES`), as one string:
+        while it is unchanged, the scene the projections see is the same."""
+        return json.dumps({k: v for k, v in self.table.items() if k not in SCANNER_TABLES}, sort_keys=True)
 
     def edited(self, edits: dict) -> "Document":
         """This document with ``edits`` ({dotted key: value}, a value of None removing the key)

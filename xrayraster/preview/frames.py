@@ -5,8 +5,8 @@ frames.
 A frame does only what changed since the last one (the module's one job): turning the sample
 only retargets the renderer (no mesh upload, no spectrum, no shader compiled again); a new
 spectrum or detector reloads the file's tables (SpekPy keeps its tube model while only the mAs
-changes); the sample is meshed again only when a key below it changed; a path-length frame does
-no spectral sum.
+changes), not a scene file's meshes; the sample is meshed again only when a key below it changed;
+a path-length frame does no spectral sum.
 """
 
 from __future__ import annotations
@@ -27,9 +27,6 @@ from ..recon.opencl import CLContext
 from ..simulate.renderer import Renderer
 from .document import Document, View
 from .quick_slice import QuickSlice, quick_slice
-
-#: Tables that leave the sample as it is: a change below them meshes or uploads nothing again.
-_NOT_THE_SAMPLE = ("geometry", "source", "detector")
 
 
 @dataclass(frozen=True)
@@ -54,7 +51,7 @@ class Previewer:
         self._gl: GLContext | None = None  # owned here: the renderer and the quick slices' scans borrow it
         self._cl = None  # the quick slices' OpenCL context, made on the first
         self._renderer: Renderer | None = None
-        self._loaded = (None, None)  # (tables as JSON, SceneFile or ScanFile)
+        self._loaded = (None, None, None)  # (tables as JSON, the sample's key, SceneFile or ScanFile)
         self._sample = (None, None)  # (the sample's tables as JSON, the scene the projections see)
 
     def frame(self, document: Document, view: View) -> Frame:
@@ -119,20 +116,21 @@ class Previewer:
 
     def load(self, document: Document):
         """The document as its loader reads it, loaded again only when its tables changed."""
-        key = json.dumps(document.table, sort_keys=True)
+        key, sample = json.dumps(document.table, sort_keys=True), document.sample_key()
         if self._loaded[0] != key:
-            loaded = document.load()
+            # Only the scanner changed: a scene file's meshes are not read again.
+            loaded = document.load(objects_of=self._loaded[2] if self._loaded[1] == sample else None)
             if document.kind == "scene" and loaded.spectrum is None:
                 raise ConfigError(f"{document.path}: a preview shows radiographs, so the file needs a [source] table "
                                   "(the X-ray spectrum) and [materials] (docs/scene-format.md)")
-            self._loaded = (key, loaded)
-        return self._loaded[1]
+            self._loaded = (key, sample, loaded)
+        return self._loaded[2]
 
     def scene(self, document: Document, loaded):
         """The scene the projections see: a scene file's objects, or a scan file's sample with its
         mount; the one kept from before while its tables are unchanged (not meshed, not uploaded
         to GL again)."""
-        key = json.dumps({k: v for k, v in document.table.items() if k not in _NOT_THE_SAMPLE}, sort_keys=True)
+        key = document.sample_key()
         if self._sample[0] != key:
             scene = loaded.scene if document.kind == "scene" else loaded.with_mount(loaded.sample_scene())
             self._sample = (key, scene)
