@@ -1,10 +1,11 @@
 """Shared fixtures. Capabilities (a GL driver, the OSMesa fallback, an OpenCL device) are probed
 once; a missing one skips with the reason, unless XRAYRASTER_REQUIRE_GL=1 /
-XRAYRASTER_REQUIRE_OSMESA=1 / XRAYRASTER_REQUIRE_OPENCL=1 / XRAYRASTER_REQUIRE_BROWSER=1 (set by
-.ci/run), which turn that skip into a failure."""
+XRAYRASTER_REQUIRE_OSMESA=1 / XRAYRASTER_REQUIRE_OPENCL=1 / XRAYRASTER_REQUIRE_BROWSER=1 /
+XRAYRASTER_REQUIRE_TORCH=1 (set by .ci/run), which turn that skip into a failure."""
 
 from __future__ import annotations
 
+import importlib
 import os
 
 import pytest
@@ -67,6 +68,19 @@ def browser():
         _require("BROWSER", f"Chromium did not start: {str(exc).splitlines()[0]}")
     yield driver
     driver.quit()
+
+
+@pytest.fixture(scope="session")
+def torch():
+    """PyTorch and MONAI, the ml extra (xrayraster.ml's torch path and its training)."""
+    try:
+        import torch
+
+        importlib.import_module("monai")
+    except ImportError as exc:
+        _require("TORCH", f"{exc.name} is not installed: pip install 'torch==2.13.0+cpu' '.[ml]'")
+    torch.manual_seed(0)
+    return torch
 
 
 @pytest.fixture

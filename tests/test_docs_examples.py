@@ -24,8 +24,9 @@ ROOT = Path(__file__).resolve().parent.parent
 DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 FENCE = re.compile(r"^```(\w*)[^\n]*\n(.*?)^```[ \t]*$", re.MULTILINE | re.DOTALL)
 EXPECT_ERROR = re.compile(r"<!--\s*expect-error:\s*(.*?)\s*-->\s*$")
-NEEDS_GL = re.compile(r"\b(Renderer|GLContext)\b")
-NEEDS_CL = re.compile(r"\b(fdk|CLContext)\b")
+SCANS = r"|\bxr\.(build|scan)\("  # a whole scan: GL for the projections and labels, OpenCL for FDK
+NEEDS_GL = re.compile(r"\b(Renderer|GLContext)\b" + SCANS)
+NEEDS_CL = re.compile(r"\b(fdk|CLContext)\b" + SCANS)
 
 
 def _blocks(lang: str) -> list:
@@ -191,6 +192,8 @@ def test_ci_runs_the_readme_command_verbatim():
     assert pytest_lines and all("XRAYRASTER_REQUIRE_GL=1" in line and "XRAYRASTER_REQUIRE_OPENCL=1" in line
                                 for line in pytest_lines)
     assert any(line.startswith("export XRAYRASTER_REQUIRE_BROWSER=1") for line in code)  # no page test skips
+    assert any(line.startswith("export XRAYRASTER_REQUIRE_TORCH=1") for line in code)  # no torch test skips
+    assert any(line.startswith('pip install "torch==2.13.0+cpu" ".[ml]"') for line in code)  # the CPU build, pinned
 
 
 LINK = re.compile(r"\]\(([^)\s]+)\)")

@@ -12,7 +12,7 @@ reconstructed volumes, as CT tools report it (``Volume.data`` with ``Volume.unit
 import importlib
 import types
 
-from . import preview, weave  # subpackages, and callable: _CallableModule below
+from . import ml, preview, weave  # subpackages (ml: lazy names; preview and weave callable: _CallableModule below)
 from .core.lazy import lazy_names
 
 __version__ = "0.1.0"
@@ -45,7 +45,8 @@ _HOMES = {
     ".simulate.renderer": ("Renderer",),
 }
 __getattr__, __dir__ = lazy_names(globals(), _HOMES)
-__all__ = sorted([*(name for names in _HOMES.values() for name in names), "preview", "weave"])
+__all__ = ["ml", "preview", "weave"]  # the subpackages, then the names above
+__all__ += sorted(name for names in _HOMES.values() for name in names)
 
 
 class _CallableModule(types.ModuleType):

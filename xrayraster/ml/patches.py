@@ -1,0 +1,246 @@
+"""Training patches from a dataset build: :class:`PatchDataset`, aligned (image, label) crops.
+
+What a patch is, and the choices made:
+
+* **Where.** Item ``i`` belongs to sample ``i // patches_per_sample`` of the split (samples in index
+  order). Its position is drawn by ``numpy.random.default_rng((seed, epoch, i))``: the same seed,
+  epoch and item give the same patch in any process, so a PyTorch ``DataLoader`` gives the same
+  batches with any ``num_workers``, and :meth:`PatchDataset.set_epoch` draws new ones.
+* **Class balance.** ``class_shares`` ({label: share}, shares summing to at most 1) is the share of
+  patches centred on a voxel of each label; the rest are placed uniformly. ``"balanced"`` (the
+  default) gives every label of the build (background included) the same share: a woven sample
+  is mostly air at the edges of a scan's grid, and its warp is a few percent of the voxels. The
+  centre is a voxel of that label: a block of ``index_block``³ voxels holding the label is drawn
+  (uniformly among such blocks), then one of the label's voxels in it. The blocks that hold each
+  label come from a first read of the sample's labels, slab by slab (a label one voxel thin is
+  found; one byte a block and label is kept). The patch is then moved inside the volume where the
+  centre lies near an edge. A sample without that label gets a uniform patch.
+* **Intensity.** ``Window(low_cm, high_cm)`` maps a fixed window of linear attenuation (cm⁻¹) to
+  [0, 1]; ``Percentiles(low, high)`` (default 0.5 and 99.5) maps each volume's own percentiles,
+  taken on every ``index_block``-th voxel along each axis, to [0, 1], which follows a change of kV or filter without labels
+  (so :func:`~xrayraster.ml.predict.predict_volume` normalises an unlabelled scan the same way).
+  Values outside are kept, not clipped (a tracer or a mount stays visible).
+* **Flips.** ``flips=True`` flips each axis with probability ½, the image and its labels together.
+  No 90° turns: they would turn weft into the direction of warp, a cue the classes are told by.
+* **Reading.** A patch reads only its crop (:mod:`.built_dataset`); a volume smaller than the patch
+  is padded with 0 (air) and label 0.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.errors import ConfigError
+from .built_dataset import BuiltDataset
+
+
+@dataclass(frozen=True)
+class Window:
+    """A fixed window of linear attenuation, ``low_cm`` → 0 and ``high_cm`` → 1 (cm⁻¹)."""
+
+    low_cm: float
+    high_cm: float
+
+    def __post_init__(self):
+        if not (math.isfinite(self.low_cm) and math.isfinite(self.high_cm) and self.low_cm < self.high_cm):
+            raise ConfigError(f"Window: need finite low_cm < high_cm, got {self.low_cm!r}, {self.high_cm!r}")
+
+    def bounds(self, sampled: np.ndarray) -> tuple[float, float]:
+        return self.low_cm, self.high_cm
+
+
+@dataclass(frozen=True)
+class Percentiles:
+    """Each volume's own ``low`` and ``high`` percentiles (0-100) → 0 and 1."""
+
+    low: float = 0.5
+    high: float = 99.5
+
+    def __post_init__(self):
+        if not 0.0 <= self.low < self.high <= 100.0:
+            raise ConfigError(f"Percentiles: need 0 <= low < high <= 100, got {self.low!r}, {self.high!r}")
+
+    def bounds(self, sampled: np.ndarray) -> tuple[float, float]:
+        low, high = np.percentile(sampled, [self.low, self.high])
+        return float(low), float(max(high, low + 1e-6))  # a constant volume: no division by 0
+
+
+@dataclass(frozen=True)
+class Patch:
+    """Where item ``item`` lies: sample ``sample``, crop start (z, y, x) voxels, the label its
+    centre was drawn on (None: placed uniformly) and the axes flipped."""
+
+    item: int
+    sample: int
+    start: tuple
+    centred_on: int | None
+    flipped: tuple
+
+
+@dataclass
+class _SampleIndex:
+    blocks: dict  # label → (n, 3) int32 (z, y, x) indices of the blocks that hold it
+    bounds: tuple  # the intensity mapped to 0 and 1, cm⁻¹
+
+
+class PatchDataset:
+    """Aligned (image, label) patches of ``patch_size`` voxels (an int, or (z, y, x)) from the
+    ``split`` (``train``, ``val``, ``test``, or None for all) of the build in ``root``, in any layout;
+    the module docstring says how they are placed, normalised and flipped. ``dataset[i]`` is
+    (image float32, labels uint8), both (z, y, x); :meth:`torch` gives a ``torch.utils.data.Dataset``."""
+
+    def __init__(self, root, patch_size=64, *, split: str | None = "train", patches_per_sample: int = 16,
+                 class_shares="balanced", normalize=None, flips: bool = False, seed: int = 0,
+                 index_block: int = 4):
+        self.dataset = BuiltDataset.open(root)
+        self.samples = self.dataset.indices(split)
+        self.split = split
+        self.patch_size = _size(patch_size)
+        self.patches_per_sample = _positive("patches_per_sample", patches_per_sample)
+        self.index_block = _positive("index_block", index_block)
+        self.class_shares = _shares(class_shares, self.dataset.labels)
+        self.normalize = Percentiles() if normalize is None else normalize
+        if not isinstance(self.normalize, (Window, Percentiles)):
+            raise ConfigError(f"normalize must be a Window or Percentiles, got {normalize!r}")
+        self.flips = bool(flips)
+        self.seed = int(seed)
+        self.epoch = 0
+        self._index: dict[int, _SampleIndex] = {}
+
+    def __len__(self) -> int:
+        return len(self.samples) * self.patches_per_sample
+
+    def __getitem__(self, item: int) -> tuple[np.ndarray, np.ndarray]:
+        patch = self.patch(item)
+        volume, labels = self.dataset.arrays(patch.sample)
+        low, high = self.sample_index(patch.sample).bounds
+        image = (_crop(volume, patch.start, self.patch_size, np.float32) - np.float32(low)) / np.float32(high - low)
+        label = _crop(labels, patch.start, self.patch_size, np.uint8)
+        axes = tuple(a for a, f in enumerate(patch.flipped) if f)
+        if axes:
+            image, label = np.flip(image, axes).copy(), np.flip(label, axes).copy()
+        return image.astype(np.float32, copy=False), label
+
+    def set_epoch(self, epoch: int) -> None:
+        """Draw the patches of ``epoch`` (module docstring)."""
+        self.epoch = int(epoch)
+
+    def patch(self, item: int) -> Patch:
+        """Where item ``item`` lies (reads only the sample's strided labels, once)."""
+        if not -len(self) <= item < len(self):
+            raise IndexError(f"item {item} is out of range: the dataset has {len(self)} patches")
+        item %= len(self)
+        sample = self.samples[item // self.patches_per_sample]
+        rng = np.random.default_rng((self.seed, self.epoch, item))
+        shape = self.dataset.arrays(sample)[1].shape
+        free = [max(n - p, 0) for n, p in zip(shape, self.patch_size)]
+        labels, shares = zip(*self.class_shares.items()) if self.class_shares else ((), ())
+        p = np.array([*shares, max(0.0, 1.0 - sum(shares))])
+        pick = rng.choice(len(p), p=p / p.sum())
+        blocks = self.sample_index(sample).blocks.get(labels[pick]) if pick < len(labels) else None
+        if blocks is not None:
+            centre = self._voxel_of(sample, labels[pick], blocks[rng.integers(len(blocks))], rng)
+            start = tuple(int(np.clip(c - p // 2, 0, f)) for c, p, f in zip(centre, self.patch_size, free))
+            centred_on = int(labels[pick])
+        else:
+            start, centred_on = tuple(int(rng.integers(f + 1)) for f in free), None
+        flipped = tuple(bool(b) for b in rng.integers(2, size=3)) if self.flips else (False, False, False)
+        return Patch(item, sample, start, centred_on, flipped)
+
+    def sample_index(self, sample: int) -> _SampleIndex:
+        """Which blocks of ``sample`` hold each label, and its intensity bounds (once a process)."""
+        if sample not in self._index:
+            volume, labels = self.dataset.arrays(sample)
+            self._index[sample] = _SampleIndex(_label_blocks(labels, self.index_block),
+                                               intensity_bounds(self.normalize, volume, self.index_block))
+        return self._index[sample]
+
+    def _voxel_of(self, sample: int, label: int, block, rng) -> tuple:
+        """A voxel of ``label`` in ``block`` of ``sample``, drawn uniformly (reads the block)."""
+        b = self.index_block
+        low = [int(i) * b for i in block]
+        region = np.asarray(self.dataset.arrays(sample)[1][low[0]:low[0] + b, low[1]:low[1] + b, low[2]:low[2] + b])
+        voxels = np.argwhere(region == label)
+        return tuple(int(o + v) for o, v in zip(low, voxels[rng.integers(len(voxels))]))
+
+    def prepare(self) -> "PatchDataset":
+        """Index every sample now (before a ``DataLoader`` forks its workers, which then inherit it)."""
+        for sample in self.samples:
+            self.sample_index(sample)
+        return self
+
+    def torch(self):
+        """This dataset as a ``torch.utils.data.Dataset`` of (image (1, z, y, x) float32, labels
+        (z, y, x) int64) tensors (needs the ``ml`` extra)."""
+        from .torch_data import TorchPatches
+
+        return TorchPatches(self)
+
+
+def strided(array, stride: int) -> np.ndarray:
+    """Every ``stride``-th voxel of ``array`` along each axis, from ``stride // 2``: one read."""
+    o = stride // 2
+    return np.asarray(array[o::stride, o::stride, o::stride])
+
+
+def _label_blocks(labels, b: int) -> dict:
+    """{label: (n, 3) int32 indices of the b³ blocks holding it}, read b planes at a time."""
+    shape = labels.shape
+    blocks: dict = {}
+    for z in range(0, shape[0], b):
+        slab = np.asarray(labels[z:z + b])
+        # Pad to whole blocks with the edge's own labels, which the blocks at the edge hold anyway.
+        slab = np.pad(slab, [(0, -n % b) for n in slab.shape], mode="edge")
+        nz, ny, nx = (n // b for n in slab.shape)
+        for value in np.unique(slab):
+            held = (slab == value).reshape(nz, b, ny, b, nx, b).any(axis=(1, 3, 5))
+            found = np.argwhere(held).astype(np.int32)
+            found[:, 0] += z // b
+            blocks.setdefault(int(value), []).append(found)
+    return {value: np.concatenate(parts) for value, parts in blocks.items()}
+
+
+def intensity_bounds(normalize, volume, stride: int) -> tuple[float, float]:
+    """The intensities ``normalize`` maps to 0 and 1 for ``volume``, from every ``stride``-th voxel."""
+    return normalize.bounds(strided(volume, stride))
+
+
+def _crop(array, start, size, dtype) -> np.ndarray:
+    """``array[start : start + size]``, padded with 0 past its end."""
+    stop = [min(b + p, n) for b, p, n in zip(start, size, array.shape)]
+    data = np.asarray(array[start[0]:stop[0], start[1]:stop[1], start[2]:stop[2]], dtype=dtype)
+    if data.shape != tuple(size):
+        data = np.pad(data, [(0, p - d) for p, d in zip(size, data.shape)])
+    return data
+
+
+def _size(patch_size) -> tuple[int, int, int]:
+    size = (patch_size,) * 3 if isinstance(patch_size, (int, np.integer)) else tuple(patch_size)
+    if len(size) != 3 or not all(isinstance(n, (int, np.integer)) and not isinstance(n, bool) and n > 0 for n in size):
+        raise ConfigError(f"patch_size must be a positive integer or (z, y, x) of them, got {patch_size!r}")
+    return tuple(int(n) for n in size)
+
+
+def _positive(name: str, value) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise ConfigError(f"{name} must be a positive integer, got {value!r}")
+    return int(value)
+
+
+def _shares(class_shares, labels: dict) -> dict:
+    if class_shares is None:
+        return {}
+    if class_shares == "balanced":
+        return {label: 1.0 / len(labels) for label in labels}
+    if not isinstance(class_shares, dict):
+        raise ConfigError(f"class_shares must be 'balanced', None or {{label: share}}, got {class_shares!r}")
+    unknown = sorted(set(class_shares) - set(labels))
+    if unknown:
+        raise ConfigError(f"class_shares: label(s) {unknown} are not in the build (its labels: {labels})")
+    shares = {int(k): float(v) for k, v in class_shares.items()}
+    if any(not 0.0 <= v <= 1.0 for v in shares.values()) or sum(shares.values()) > 1.0 + 1e-9:
+        raise ConfigError(f"class_shares: each share in [0, 1], summing to at most 1; got {class_shares}")
+    return shares
