@@ -72,11 +72,13 @@ def browser():
 
 @pytest.fixture(scope="session")
 def torch():
-    """PyTorch and MONAI, the ml extra (xrayraster.ml's torch path and its training)."""
+    """PyTorch, with the rest of the ml extra (MONAI, scikit-learn, scikit-image): xrayraster.ml's
+    torch path and the training experiment."""
     try:
         import torch
 
-        importlib.import_module("monai")
+        for name in ("monai", "sklearn", "skimage"):
+            importlib.import_module(name)
     except ImportError as exc:
         _require("TORCH", f"{exc.name} is not installed: pip install 'torch==2.13.0+cpu' '.[ml]'")
     torch.manual_seed(0)

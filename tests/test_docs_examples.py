@@ -151,16 +151,18 @@ def test_toml_scene_renders_every_material(doc, line, text, expect, tmp_path, gl
 def test_bundled_examples_are_quoted_verbatim_in_the_format_reference():
     """Scene files in docs/scene-format.md (loaded there as toml blocks); weave files in docs/weave.md,
     woven scan files (a [weave] and a [source]) in docs/scan.md or, the twin's, docs/twin.md, and
-    dataset files (a [dataset]) in docs/dataset.md, as text blocks."""
+    dataset files (a [dataset]) in docs/dataset.md (the training experiment's, ml_*, in docs/ml.md),
+    as text blocks."""
     quoted = {text.strip() for doc, _, text, _ in TOML if doc.name == "scene-format.md"}
     examples = sorted((ROOT / "examples").glob("*.toml"))
     assert examples
     for example in examples:
         text = example.read_text().strip()
         data = tomllib.loads(text)
-        if "dataset" in data:
-            assert f"```text\n{text}\n```" in (ROOT / "docs" / "dataset.md").read_text(), \
-                f"{example.name} differs from its copy in docs/dataset.md"
+        if "dataset" in data:  # the training experiment's in docs/ml.md
+            doc = "ml.md" if example.name.startswith("ml_") else "dataset.md"
+            assert f"```text\n{text}\n```" in (ROOT / "docs" / doc).read_text(), \
+                f"{example.name} differs from its copy in docs/{doc}"
         elif "weave" in data:
             docs = ("scan.md", "twin.md") if "source" in data else ("weave.md",)
             assert any(f"```text\n{text}\n```" in (ROOT / "docs" / doc).read_text() for doc in docs), \

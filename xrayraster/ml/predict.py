@@ -36,8 +36,8 @@ def predict_volume(model, volume, patch_size=64, *, overlap: float = 0.5, normal
     if volume.ndim != 3:
         raise ConfigError(f"volume must be 3-D (z, y, x), got shape {volume.shape}")
     size = _size(patch_size)
-    low, high = intensity_bounds(normalize or Percentiles(), volume, index_block)
-    padded = np.pad((volume - np.float32(low)) / np.float32(high - low),
+    normalize = normalize or Percentiles()
+    padded = np.pad(normalize.scaled(volume, intensity_bounds(normalize, volume, index_block)),
                     [(0, max(p - n, 0)) for p, n in zip(size, volume.shape)])
     run = _as_function(model)
     weight = _weights(size, blend)

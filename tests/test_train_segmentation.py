@@ -1,0 +1,71 @@
+"""scripts/train_segmentation.py (docs/ml.md): the baselines recover well-separated classes exactly,
+and the --quick run builds both sets, trains, scores every method on both, and reruns with the same
+seed to the same scores (the experiment's reproducibility)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from scripts.common import ROOT
+
+from scripts import ml_shift_ablation, train_segmentation
+
+METHODS = {"network", "multi-Otsu, median 3³", "multi-Otsu, Gaussian σ 1", "Gaussian mixture, median 3³",
+           "Gaussian mixture, Gaussian σ 1"}
+
+
+def test_baselines_recover_well_separated_classes_and_dice_counts_overlap(torch):
+    """Blocks of four attenuations far apart, little noise: each baseline gives back the labels,
+    its clusters matched to the labels by the order of their means (here not the label order).
+    (``torch``: the ml extra, which brings scikit-learn.)"""
+    z, y, x = np.indices((30, 24, 24))
+    truth = ((z // 10 + y // 12) % 4).astype(np.uint8)
+    mu = np.array([0.0, 0.9, 0.3, 0.6])  # label 2 is the second darkest: order air, 2, 3, 1
+    volume = (mu[truth] + np.random.default_rng(0).normal(0, 0.02, truth.shape)).astype(np.float32)
+    for name in ("multi-Otsu", "Gaussian mixture"):
+        for smooth in ("median 3³", "Gaussian σ 1"):
+            predicted = train_segmentation.baseline(name, smooth, [0, 2, 3, 1])(volume)
+            inner = (z % 10 > 2) & (z % 10 < 7) & (y % 12 > 2) & (y % 12 < 9)  # away from the blurred edges
+            assert np.array_equal(predicted[inner], truth[inner]), (name, smooth)
+    half = truth.copy()
+    half[:15] = 0  # wipes the other classes' voxels in the first half
+    d = train_segmentation.dice(truth, half)
+    for c in (1, 2, 3):
+        kept, total = np.sum((truth == c) & (half == c)), np.sum(truth == c)
+        assert d[c] == pytest.approx(2 * kept / (total + kept))
+
+
+def test_the_quick_run_scores_every_method_and_reruns_to_the_same_scores(torch, gl, cl, tmp_path):
+    common = ["--quick", "--out", str(tmp_path / "ml"), "--plots-dir", str(tmp_path)]
+    runs = []
+    for name in ("first", "again"):  # the second reuses the builds, and trains and scores again
+        assert train_segmentation.main([*common, "--json", str(tmp_path / f"{name}.json")]) == 0
+        runs.append(json.loads((tmp_path / f"{name}.json").read_text()))
+    first, again = runs
+    assert first["iterations"] == 30 and first["classes"] == 4 and first["train_samples"] == 8
+    for set_name in ("test split", "shifted"):
+        results = first["results"][set_name]
+        assert set(results) == METHODS
+        for method, r in results.items():
+            assert 0.0 <= r["mean_dice"] <= 1.0 and set(r["dice"]) == {"matrix", "weft", "warp"}
+            assert r["mean_dice"] == again["results"][set_name][method]["mean_dice"]  # same seed, same network
+            scored = np.asarray(r["confusion"]).sum()
+            assert scored == np.asarray(results["network"]["confusion"]).sum() > 0  # every method, the same voxels
+    assert first["loss_last_20"] == again["loss_last_20"]
+    for png in ("ml_curve.png", "ml_slices.png"):
+        assert (tmp_path / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_every_ablation_variant_takes_back_what_it_says():
+    """Each variant's patterns match one line each of the shipped shifted file (variant_text asserts
+    it), and the training weave's ranges are those of examples/ml_train.toml."""
+    base = (ROOT / "examples" / "ml_shifted.toml").read_text()
+    train = (ROOT / "examples" / "ml_train.toml").read_text()
+    for name, edits in ml_shift_ablation.VARIANTS.items():
+        text = ml_shift_ablation.variant_text(base, edits, 3)
+        assert "count = 3" in text and text != base, name
+    for replacement in ml_shift_ablation.TRAINING_WEAVE.values():
+        assert replacement in train
