@@ -193,8 +193,9 @@ def score_set(model, root, split: str, patch: int, order: list[int]):
             start = time.perf_counter()
             predicted = segment(volume)
             results[method]["seconds"] += time.perf_counter() - start
-            results[method]["confusion"] += confusion(truth[keep], predicted[keep], len(order))
-            results[method]["per_volume"].append(dice(truth[keep], predicted[keep]))
+            counts = confusion(truth[keep], predicted[keep], len(order))
+            results[method]["confusion"] += counts
+            results[method]["per_volume"].append(dice_from_confusion(counts))
             example["predicted"].setdefault(method, predicted[middle])
     for r in results.values():
         total = dice_from_confusion(r["confusion"])
@@ -231,15 +232,11 @@ def baseline(name: str, smooth: str, order: list[int]):
 
 def confusion(truth: np.ndarray, predicted: np.ndarray, k: int) -> np.ndarray:
     """Voxels by (true label, predicted label)."""
-    return np.bincount(truth.astype(np.int64) * k + np.minimum(predicted, k - 1), minlength=k * k).reshape(k, k)
-
-
-def dice(truth: np.ndarray, predicted: np.ndarray) -> dict:
-    return {c: 2 * float(np.sum((truth == c) & (predicted == c))) / max(float(np.sum(truth == c) + np.sum(predicted == c)), 1.0)
-            for c in SCORED}
+    return np.bincount((truth.astype(np.int64) * k + np.minimum(predicted, k - 1)).ravel(), minlength=k * k).reshape(k, k)
 
 
 def dice_from_confusion(m: np.ndarray) -> dict:
+    """Dice of each scored label from a confusion matrix (true label by row, predicted by column)."""
     return {c: 2 * float(m[c, c]) / max(float(m[c, :].sum() + m[:, c].sum()), 1.0) for c in SCORED}
 
 
