@@ -20,7 +20,7 @@ from pathlib import Path
 import xrayraster as xr
 
 from .common import OUT, ROOT, announce, conclude, outputs, parser, say
-from .train_segmentation import NAMES, load_model, score_set
+from .train_segmentation import NAMES, best_baseline, load_model, score_set
 
 TRAINING_WEAVE = {  # examples/ml_train.toml's ranges
     '"weave.weft_spacing" = { choice = [2.1, 2.9] }': '"weave.weft_spacing" = { uniform = [2.35, 2.65] }',
@@ -62,7 +62,7 @@ def main(argv=None) -> int:
     args = outputs(ap.parse_args(argv), "ml_shift_ablation")
     t_start = time.perf_counter()
     command, machine = announce()
-    model, patch, order = load_model(args.trained or OUT / ("ml_quick" if args.quick else "ml"))
+    model, patch, order, normalize = load_model(args.trained or OUT / ("ml_quick" if args.quick else "ml"))
     base = (ROOT / "examples" / "ml_shifted.toml").read_text()
     folder = args.out or OUT / ("ml_ablation_quick" if args.quick else "ml_ablation")
     results = {}
@@ -72,9 +72,9 @@ def main(argv=None) -> int:
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(variant_text(base, edits, 1 if args.quick else 3))
         xr.build(path, folder / slug, workers=2)
-        scores, _ = score_set(model, folder / slug, "test", patch, order)
+        scores, _ = score_set(model, folder / slug, "test", patch, order, normalize)
         results[name] = {m: {"mean_dice": r["mean_dice"], "dice": r["dice"]} for m, r in scores.items()}
-        best = max((m for m in scores if m != "network"), key=lambda m: scores[m]["mean_dice"])
+        best = best_baseline(scores)
         net = scores["network"]
         say(f"{name}: network {net['mean_dice']:.3f} ("
             + ", ".join(f"{n} {net['dice'][n]:.3f}" for n in NAMES.values())

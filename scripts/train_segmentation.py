@@ -2,21 +2,32 @@
 methods users try first (docs/ml.md).
 
     python -m scripts.train_segmentation           # the experiment of docs/ml.md (~25 min on 2 cores)
-    python -m scripts.train_segmentation --quick   # a smoke run: 11 samples, 30 iterations (~1 min)
+    python -m scripts.train_segmentation --quick   # a smoke run: 12 samples, 30 iterations (~1 min)
 
 1. **Data.** ``xr.build`` of examples/ml_train.toml (60 scans; its ``train`` split trains the
    network, its ``test`` split scores it) and of examples/ml_shifted.toml (10 scans outside every
    training range: scanner imperfections, 50 kV, other cells and distortions, a PMMA holder, a glass
-   tracer), into out/ml/ unless already there (a build resumes).
+   tracer), into out/ml/ unless already there (a build resumes). Also a fresh draw of the shifted
+   set (its seed + 1000: 10 other scans from the same ranges), scored only after every choice here
+   (the normalisation, the post-processing) was fixed by the shifted set's scores: a choice fitted
+   to those 10 scans would show as a gap between the two. ``--train-file`` trains on another dataset
+   file of examples/ instead (docs/ml.md: ml_train_randomized.toml).
 2. **Network.** MONAI's 3-D ``UNet`` (channels 16-128, strides 2, two residual units), one input
-   channel (the volume's own 0.5th and 98th percentiles mapped to 0 and 1, clipped to -0.25 and
-   1.25: ``xr.ml.Percentiles()``), one output per label of the
+   channel (0 cm⁻¹ mapped to 0 and the median of the volume's material to 1, clipped to -0.25 and
+   1.5: ``xr.ml.MaterialScale()``), one output per label of the
    training build (air, matrix, weft, warp); Dice + cross-entropy loss (MONAI's ``DiceCELoss``),
    Adam at 2e-3 with cosine decay, ``--iterations`` batches of ``--batch`` patches of ``--patch``³
    voxels (:class:`xrayraster.ml.PatchDataset`: balanced over the labels, flipped). Seeded, with
    deterministic kernels and a fixed thread count, so a rerun trains the same network.
+   ``--augment`` (off by default: it scored lower here, docs/ml.md) adds MONAI's transforms after
+   nnU-Net's (:func:`augmentation`): each patch read 1.25 times as wide and resampled to
+   ``--patch``³ at a scale of 0.85-1.15 along each axis, its intensities scaled (x0.85-1.15),
+   shifted (±0.1), given a gamma (0.8-1.25), blurred (σ 0.5-1 voxel) and given noise (σ up to
+   0.05), each with a probability of 0.3-0.5.
 3. **Scores.** Each test volume segmented whole (:func:`xrayraster.ml.predict_volume`, windows
-   overlapping by half), then per volume Dice of matrix, weft and warp and their mean, and the
+   overlapping by half) and its largest body kept (:func:`xrayraster.ml.largest_component`: the
+   specimen is one body; every method's labels get the same step, and the network's are also scored
+   without it), then per volume Dice of matrix, weft and warp and their mean, and the
    confusion matrix (voxels by true and predicted label), summed over each set. The shifted set's
    tracer voxels (label 4, a class the network cannot know) are left out of every score.
 4. **Baselines**, on the same volumes: multi-Otsu thresholds (scikit-image) and a Gaussian mixture
@@ -44,15 +55,26 @@ from xrayraster.pipeline.dataset_file import load_dataset_file
 from .common import OUT, ROOT, announce, conclude, cores, outputs, parser, pyplot, save, say
 
 NAMES = {1: "matrix", 2: "weft", 3: "warp"}  # the scored labels
+UNFILTERED = "network, every body kept"  # the network's labels scored without largest_component
 SCORED = tuple(NAMES)
+READ = 1.25  # an augmented patch is read this many times as wide, then resampled (augmentation)
+NORMALIZE = xr.ml.MaterialScale()  # the network's input (module docstring)
+BUILDS = {  # folder under --out: (dataset file in examples/, added to its seed, samples with --quick)
+    "train": ("ml_train.toml", 0, 9),  # --quick: the 9th sample is the first of the test split
+    "shifted": ("ml_shifted.toml", 0, 2),
+    "fresh": ("ml_shifted.toml", 1000, 1),
+}
 
 
 def main(argv=None) -> int:
-    ap = parser(__doc__, "a smoke run: 11 samples, 30 iterations (~1 min)", plots=True)
+    ap = parser(__doc__, "a smoke run: 12 samples, 30 iterations (~1 min)", plots=True)
     ap.add_argument("--iterations", type=int, help="training batches (default 3000: about 22 min on 2 cores; --quick: 30)")
     ap.add_argument("--batch", type=int, default=2, help="patches a batch (default 2)")
     ap.add_argument("--patch", type=int, help="patch side in voxels (default 64; --quick: 32)")
     ap.add_argument("--seed", type=int, default=0, help="the training's seed (default 0)")
+    ap.add_argument("--augment", action="store_true", help="augment each patch (module docstring; off by default)")
+    ap.add_argument("--train-file", default=BUILDS["train"][0],
+                    help="the training set's dataset file in examples/ (default ml_train.toml)")
     ap.add_argument("--out", type=Path, help="the builds and model.pt (default out/ml; --quick: out/ml_quick)")
     args = outputs(ap.parse_args(argv), "train_segmentation")
     iterations = args.iterations or (30 if args.quick else 3000)
@@ -67,31 +89,33 @@ def main(argv=None) -> int:
     torch.set_num_threads(cores())
     folder = args.out or OUT / ("ml_quick" if args.quick else "ml")
     builds, seconds = {}, {}
-    for name, count in (("train", 9), ("shifted", 2)):  # --quick: the first test sample is the 9th
-        dataset = load_dataset_file(ROOT / "examples" / f"ml_{name}.toml")
-        if args.quick:
-            dataset = dataclasses.replace(dataset, count=count)
+    for name, (file, reseed, count) in BUILDS.items():
+        dataset = load_dataset_file(ROOT / "examples" / (args.train_file if name == "train" else file))
+        dataset = dataclasses.replace(dataset, seed=dataset.seed + reseed, count=count if args.quick else dataset.count)
         start = time.perf_counter()
         xr.build(dataset, folder / name, workers=2)
         seconds[f"build {name}"] = time.perf_counter() - start
         builds[name] = folder / name
         say(f"build {name}: {dataset.count} samples in {seconds[f'build {name}']:.0f} s (0 s: built before)")
 
-    train = xr.ml.PatchDataset(builds["train"], patch, split="train", patches_per_sample=max(8, iterations),
-                               flips=True, seed=args.seed).prepare()
+    read = round(patch * READ) if args.augment else patch
+    train = xr.ml.PatchDataset(builds["train"], read, split="train", patches_per_sample=max(8, iterations),
+                               flips=True, seed=args.seed, normalize=NORMALIZE).prepare()
     classes = max(train.dataset.labels) + 1
+    augment = augmentation(patch, args.seed) if args.augment else None
     start = time.perf_counter()
-    model, losses = fit(torch, train, classes, iterations, args.batch, args.seed)
+    model, losses = fit(torch, train, classes, iterations, args.batch, args.seed, augment)
     seconds["training"] = time.perf_counter() - start
     say(f"training: {iterations} batches of {args.batch} × {patch}³ in {seconds['training']:.0f} s "
         f"({seconds['training'] / iterations:.2f} s a batch); loss {np.mean(losses[:20]):.3f} → {np.mean(losses[-20:]):.3f}")
     order = label_order(train)
-    save_model(model, folder, patch, order)
-    sets = {"test split": (builds["train"], "test"), "shifted": (builds["shifted"], "test")}
+    save_model(model, folder, patch, order, NORMALIZE)
+    sets = {"test split": (builds["train"], "test"), "shifted": (builds["shifted"], "test"),
+            "shifted, fresh draw": (builds["fresh"], "test")}
     results, examples = {}, {}
     for set_name, (root, split) in sets.items():
         start = time.perf_counter()
-        results[set_name], examples[set_name] = score_set(model, root, split, patch, order)
+        results[set_name], examples[set_name] = score_set(model, root, split, patch, order, NORMALIZE)
         seconds[f"scoring {set_name}"] = time.perf_counter() - start
         for method, r in results[set_name].items():
             dice = ", ".join(f"{NAMES[c]} {r['dice'][NAMES[c]]:.3f}" for c in SCORED)
@@ -99,15 +123,17 @@ def main(argv=None) -> int:
     plots = curve_plot(losses, args.plots_dir / "ml_curve.png"), slices_plot(examples["shifted"], results["shifted"],
                                                                              args.plots_dir / "ml_slices.png")
     payload = {"command": command, "machine": machine, "iterations": iterations, "batch": args.batch, "patch": patch,
-               "seed": args.seed, "classes": classes, "train_samples": len(train.samples), "seconds": seconds,
+               "seed": args.seed, "train_file": args.train_file, "augment": args.augment, "normalize": repr(NORMALIZE),
+               "classes": classes, "train_samples": len(train.samples), "seconds": seconds,
                "loss_first_20": float(np.mean(losses[:20])), "loss_last_20": float(np.mean(losses[-20:])),
                "results": results, "plots": [str(p) for p in plots if p]}
     conclude(args.json, payload, machine, t_start)
     return 0
 
 
-def fit(torch, train, classes: int, iterations: int, batch: int, seed: int):
-    """MONAI's UNet trained for ``iterations`` batches (module docstring); returns it and the losses."""
+def fit(torch, train, classes: int, iterations: int, batch: int, seed: int, augment=None):
+    """MONAI's UNet trained for ``iterations`` batches (module docstring), each patch passed through
+    ``augment`` (:func:`augmentation`) when given; returns the network and the losses."""
     from monai.losses import DiceCELoss
 
     model = make_model(classes)
@@ -122,6 +148,8 @@ def fit(torch, train, classes: int, iterations: int, batch: int, seed: int):
     while len(losses) < iterations:
         data.set_epoch(epoch)
         for image, labels in loader:
+            if augment is not None:
+                image, labels = augmented(torch, augment, image, labels)
             optimiser.zero_grad()
             loss = loss_of(model(image), labels[:, None])
             loss.backward()
@@ -136,6 +164,30 @@ def fit(torch, train, classes: int, iterations: int, batch: int, seed: int):
     return model, losses
 
 
+def augmentation(patch: int, seed: int):
+    """The augmentation of the module docstring: MONAI dictionary transforms of ``image`` (1, z, y, x)
+    and ``label`` (1, z, y, x) read ``READ`` times ``patch`` wide, giving ``patch``³; seeded."""
+    from monai import transforms as t
+
+    sigma = (0.5, 1.0)
+    return t.Compose([
+        t.RandAffined(("image", "label"), spatial_size=(patch,) * 3, prob=1.0, scale_range=(0.15,) * 3,
+                      mode=("bilinear", "nearest"), padding_mode="zeros"),
+        t.RandScaleIntensityd("image", factors=0.15, prob=0.5),
+        t.RandShiftIntensityd("image", offsets=0.1, prob=0.5),
+        t.RandAdjustContrastd("image", gamma=(0.8, 1.25), prob=0.3),
+        t.RandGaussianSmoothd("image", sigma_x=sigma, sigma_y=sigma, sigma_z=sigma, prob=0.3),
+        t.RandGaussianNoised("image", std=0.05, prob=0.3),
+    ]).set_random_state(seed)
+
+
+def augmented(torch, augment, image, labels):
+    """A batch (N, 1, z, y, x) and its labels (N, z, y, x), each patch passed through ``augment``."""
+    items = [augment({"image": i, "label": lab[None]}) for i, lab in zip(image, labels)]
+    return (torch.stack([d["image"].as_tensor() for d in items]),
+            torch.stack([d["label"].as_tensor()[0] for d in items]).long())
+
+
 def make_model(classes: int):
     """The network (module docstring), untrained."""
     from monai.networks.nets import UNet
@@ -144,22 +196,26 @@ def make_model(classes: int):
                 num_res_units=2)
 
 
-def save_model(model, folder: Path, patch: int, order: list[int]) -> None:
-    """``model.pt`` (the weights) and ``model.json`` (what scoring needs: the patch and the label order)."""
+def save_model(model, folder: Path, patch: int, order: list[int], normalize) -> None:
+    """``model.pt`` (the weights) and ``model.json`` (what scoring needs: the patch, the label order
+    and the normalisation)."""
     import torch
 
     torch.save(model.state_dict(), folder / "model.pt")
-    (folder / "model.json").write_text(json.dumps({"patch": patch, "order": order}) + "\n")
+    info = {"patch": patch, "order": order, "normalize": [type(normalize).__name__, dataclasses.asdict(normalize)]}
+    (folder / "model.json").write_text(json.dumps(info) + "\n")
 
 
 def load_model(folder: Path):
-    """(model, patch, label order) as :func:`save_model` left them in ``folder``."""
+    """(model, patch, label order, normalisation) as :func:`save_model` left them in ``folder``."""
     import torch
 
     info = json.loads((folder / "model.json").read_text())
     model = make_model(len(info["order"]))
     model.load_state_dict(torch.load(folder / "model.pt"))
-    return model.eval(), info["patch"], info["order"]
+    kind, fields = info["normalize"]
+    normalize = getattr(xr.ml, kind)(**{k: tuple(v) if isinstance(v, list) else v for k, v in fields.items()})
+    return model.eval(), info["patch"], info["order"], normalize
 
 
 def label_order(train) -> list[int]:
@@ -174,14 +230,14 @@ def label_order(train) -> list[int]:
     return sorted(sums, key=lambda label: sums[label] / max(counts[label], 1))
 
 
-def score_set(model, root, split: str, patch: int, order: list[int]):
+def score_set(model, root, split: str, patch: int, order: list[int], normalize):
     """{method: scores} over the set's volumes, and the first volume's middle slices for the figure."""
     dataset = xr.ml.PatchDataset(root, patch, split=split)
-    methods = {"network": lambda v: xr.ml.predict_volume(model, v, patch, overlap=0.5),
+    methods = {"network": lambda v: xr.ml.predict_volume(model, v, patch, overlap=0.5, normalize=normalize),
                **{f"{name}, {smooth}": baseline(name, smooth, order) for name in ("multi-Otsu", "Gaussian mixture")
                   for smooth in ("median 3³", "Gaussian σ 1")}}
     results = {m: {"confusion": np.zeros((len(order), len(order)), np.int64), "per_volume": [], "seconds": 0.0}
-               for m in methods}
+               for m in (*methods, UNFILTERED)}
     example = None
     for sample in dataset.samples:
         volume, truth = (np.asarray(a) for a in dataset.dataset.arrays(sample))
@@ -192,11 +248,17 @@ def score_set(model, root, split: str, patch: int, order: list[int]):
         for method, segment in methods.items():
             start = time.perf_counter()
             predicted = segment(volume)
+            segmented = time.perf_counter()
+            outputs = {method: xr.ml.largest_component(predicted)}
             results[method]["seconds"] += time.perf_counter() - start
-            counts = confusion(truth[keep], predicted[keep], len(order))
-            results[method]["confusion"] += counts
-            results[method]["per_volume"].append(dice_from_confusion(counts))
-            example["predicted"].setdefault(method, predicted[middle])
+            if method == "network":
+                outputs[UNFILTERED] = predicted
+                results[UNFILTERED]["seconds"] += segmented - start
+            for name, labels in outputs.items():
+                counts = confusion(truth[keep], labels[keep], len(order))
+                results[name]["confusion"] += counts
+                results[name]["per_volume"].append(dice_from_confusion(counts))
+                example["predicted"].setdefault(name, labels[middle])
     for r in results.values():
         total = dice_from_confusion(r["confusion"])
         r["dice"] = {NAMES[c]: total[c] for c in SCORED}
@@ -205,6 +267,11 @@ def score_set(model, root, split: str, patch: int, order: list[int]):
         r["per_volume"] = [{NAMES[c]: d[c] for c in SCORED} for d in r["per_volume"]]
         r["confusion"] = r["confusion"].tolist()
     return results, example
+
+
+def best_baseline(results: dict) -> str:
+    """The method other than the network with the highest mean Dice in ``results``."""
+    return max((m for m in results if not m.startswith("network")), key=lambda m: results[m]["mean_dice"])
 
 
 def baseline(name: str, smooth: str, order: list[int]):
@@ -264,7 +331,7 @@ def slices_plot(example: dict, results: dict, path: Path) -> Path | None:
         return None
     from matplotlib.colors import ListedColormap
 
-    best = max((m for m in results if m != "network"), key=lambda m: results[m]["mean_dice"])
+    best = best_baseline(results)
     colours = ListedColormap(["black", "#4c72b0", "#dd8452", "#55a868", "#c44e52"])
     panels = [("scan (cm⁻¹)", example["volume"], "gray", None), ("truth", example["truth"], colours, 4),
               (f"network: mean Dice {results['network']['mean_dice']:.3f}", example["predicted"]["network"], colours, 4),

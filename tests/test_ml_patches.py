@@ -172,13 +172,38 @@ def test_a_bright_inclusion_neither_rescales_the_volume_nor_leaves_the_range():
         xr.ml.Percentiles(clip=(1.0, 0.0))
 
 
+def test_the_material_scale_is_the_bulk_and_a_minority_barely_moves_it():
+    """Air and a material of known median: MaterialScale maps 0 cm⁻¹ to 0 and that median to 1.
+    1 % of glass-bright voxels, or a slab of plastic a little darker than the material filling 10 %
+    of the grid, moves it by under 1.5 %; the bright voxels move the default Percentiles' 98th by more."""
+    pytest.importorskip("skimage", reason="MaterialScale's threshold is scikit-image's: pip install scikit-image")
+    rng = np.random.default_rng(1)
+    air = rng.random((48, 48, 48)) < 0.4
+    volume = np.where(air, rng.normal(0.0, 0.01, air.shape), rng.normal(0.5, 0.03, air.shape)).astype(np.float32)
+    scale = xr.ml.MaterialScale()
+    low, high = scale.bounds(strided(volume, 4))
+    assert low == 0.0 and high == pytest.approx(np.median(strided(volume, 4)[~strided(air, 4)]), rel=1e-9)
+    bright, holder = volume.copy(), volume.copy()
+    bright[rng.random(air.shape) < 0.01] = 1.6
+    holder[:5] = rng.normal(0.45, 0.03, holder[:5].shape)
+    def moved(normalize, changed):
+        return normalize.bounds(strided(changed, 4))[1] / normalize.bounds(strided(volume, 4))[1] - 1
+
+    assert abs(moved(scale, holder)) < 0.015
+    assert abs(moved(scale, bright)) < 0.015 < abs(moved(xr.ml.Percentiles(), bright))
+    assert xr.ml.MaterialScale().scaled(bright, scale.bounds(strided(bright, 4))).max() == np.float32(1.5)
+    assert xr.ml.MaterialScale().bounds(np.zeros(64, np.float32)) == (0.0, 1e-6)
+    with pytest.raises(ConfigError, match=r"MaterialScale: quantile must be in \(0, 1\)"):
+        xr.ml.MaterialScale(quantile=1.0)
+
+
 @pytest.mark.parametrize("options, message", [
     ({"split": "holdout"}, r"split must be one of train, val, test or None"),
     ({"class_shares": {7: 0.5}}, r"class_shares: label\(s\) \[7\] are not in the build"),
     ({"class_shares": {1: 0.7, 2: 0.6}}, r"summing to at most 1"),
     ({"patch_size": (8, 8)}, r"patch_size must be a positive integer or \(z, y, x\)"),
     ({"patches_per_sample": 0}, r"patches_per_sample must be a positive integer"),
-    ({"normalize": "z-score"}, r"normalize must be a Window or Percentiles"),
+    ({"normalize": "z-score"}, r"normalize must be a Window, Percentiles or MaterialScale"),
 ])
 def test_bad_options_are_named(build, options, message):
     with pytest.raises(ConfigError, match=message):
@@ -244,3 +269,28 @@ def test_windows_blend_as_monais_sliding_window_inference():
     got = xr.ml.predict_volume(lambda b: model(b).numpy(), volume, (12, 16, 10), overlap=0.4, blend="uniform",
                                normalize=xr.ml.Window(0.0, 1.0), scores=True)
     np.testing.assert_allclose(got, expected, rtol=1e-5, atol=1e-6)
+
+
+# -- largest_component ---------------------------------------------------------------------------------
+
+def test_the_largest_body_is_kept_and_the_rest_cleared():
+    """A specimen of three labels, a holder slab below a gap of air, and a voxel touching the
+    specimen at a corner only: the holder goes; the corner voxel stays with 26 neighbours and goes
+    with 6 (faces only)."""
+    labels = np.zeros((20, 12, 12), np.uint8)
+    labels[8:18, 2:10, 2:10] = 1           # matrix
+    labels[10:12, 2:10, 2:10] = 2          # a weft layer
+    labels[13:15, 4:6, 2:10] = 3           # a warp inside
+    labels[0:4] = 1                        # the holder: plastic that looks like matrix
+    labels[7, 1, 1] = 3                    # meets the specimen at (8, 2, 2) by a corner
+    specimen = labels.copy()
+    specimen[0:4] = 0
+    np.testing.assert_array_equal(xr.ml.largest_component(labels), specimen)
+    faces_only = specimen.copy()
+    faces_only[7, 1, 1] = 0
+    np.testing.assert_array_equal(xr.ml.largest_component(labels, connectivity=1), faces_only)
+    one_body = specimen.copy()
+    np.testing.assert_array_equal(xr.ml.largest_component(one_body), specimen)
+    assert not xr.ml.largest_component(np.zeros((3, 3, 3), np.uint8)).any()
+    with pytest.raises(ConfigError, match="connectivity must be 1 to 3"):
+        xr.ml.largest_component(labels, connectivity=4)

@@ -87,3 +87,19 @@ def test_a_unet_trains_on_patches_and_segments_a_volume(torch, tmp_path):
     dice = [2 * np.sum((predicted == c) & (truth == c)) / (np.sum(predicted == c) + np.sum(truth == c)) for c in (1, 2, 3)]
     print(losses[:3], losses[-3:], dice)
     assert np.mean(dice) > 0.8, dice
+
+
+def test_the_largest_body_is_monais(torch):
+    """largest_component against MONAI's KeepLargestConnectedComponent (every label one foreground)
+    on random blobs of three labels, with 26 and with 6 neighbours."""
+    from monai.transforms import KeepLargestConnectedComponent
+    from scipy import ndimage
+
+    rng = np.random.default_rng(3)
+    field = ndimage.gaussian_filter(rng.normal(size=(30, 34, 26)), 1.5)
+    labels = np.digitize(field, np.quantile(field, [0.6, 0.75, 0.9])).astype(np.uint8)
+    assert ndimage.label(labels > 0)[1] > 3  # several bodies to choose from
+    for connectivity in (1, 3):
+        expected = KeepLargestConnectedComponent(applied_labels=[1, 2, 3], independent=False,
+                                                 connectivity=connectivity)(torch.from_numpy(labels)[None])[0]
+        np.testing.assert_array_equal(xr.ml.largest_component(labels, connectivity=connectivity), expected.numpy())

@@ -13,7 +13,7 @@ from scripts.common import ROOT
 
 from scripts import ml_shift_ablation, train_segmentation
 
-METHODS = {"network", "multi-Otsu, median 3³", "multi-Otsu, Gaussian σ 1", "Gaussian mixture, median 3³",
+METHODS = {"network", "network, every body kept", "multi-Otsu, median 3³", "multi-Otsu, Gaussian σ 1", "Gaussian mixture, median 3³",
            "Gaussian mixture, Gaussian σ 1"}
 
 
@@ -46,7 +46,7 @@ def test_the_quick_run_scores_every_method_and_reruns_to_the_same_scores(torch, 
         runs.append(json.loads((tmp_path / f"{name}.json").read_text()))
     first, again = runs
     assert first["iterations"] == 30 and first["classes"] == 4 and first["train_samples"] == 8
-    for set_name in ("test split", "shifted"):
+    for set_name in ("test split", "shifted", "shifted, fresh draw"):
         results = first["results"][set_name]
         assert set(results) == METHODS
         for method, r in results.items():

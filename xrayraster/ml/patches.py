@@ -23,6 +23,12 @@ What a patch is, and the choices made:
   voxels) neither rescales the volume nor reaches the network with values it never saw. Measured
   (docs/ml.md): a glass tracer of 0.7-1 % of the voxels moved the 99.5th percentile from 0.54 to
   1.65 cm⁻¹. ``Window(low_cm, high_cm, clip)`` maps a fixed window of attenuation (cm⁻¹) instead.
+  ``MaterialScale(quantile, clip)`` maps 0 cm⁻¹ to 0 and the median (by default) of the volume's
+  material, the voxels above its Otsu threshold, to 1: a bulk statistic, which a minority of
+  bright or plastic voxels barely moves, where a percentile of the whole volume sits in the tail
+  that such voxels fill (and moves with the share of air in the grid). Measured (docs/ml.md): over
+  the shifted scans, the class medians differ from the training scans' by 0.009 of the scale with
+  it, by 0.091 with ``Percentiles()``, which a glass tracer pushes down.
 * **Flips.** ``flips=True`` flips each axis with probability ½, the image and its labels together.
   No 90° turns: they would turn weft into the direction of warp, a cue the classes are told by.
 * **Reading.** A patch reads only its crop (:mod:`.built_dataset`); a volume smaller than the patch
@@ -41,7 +47,7 @@ from .built_dataset import BuiltDataset
 
 
 class _Intensity:
-    """What :class:`Window` and :class:`Percentiles` share: the mapping through a volume's bounds."""
+    """What the normalisations share: the mapping through a volume's bounds (low → 0, high → 1)."""
 
     clip: tuple | None
 
@@ -96,6 +102,31 @@ class Percentiles(_Intensity):
 
 
 @dataclass(frozen=True)
+class MaterialScale(_Intensity):
+    """0 cm⁻¹ (air) → 0 and the ``quantile`` (0-1) of the volume's material → 1, the result clipped
+    to ``clip`` (or None). The material is every voxel above the volume's Otsu threshold (air
+    against the rest; scikit-image, the ``ml`` extra). For volumes of absolute attenuation, as a
+    reconstruction of xrayraster's is (module docstring: why a bulk statistic, not a tail)."""
+
+    quantile: float = 0.5
+    clip: tuple | None = (-0.25, 1.5)
+
+    def __post_init__(self):
+        if not 0.0 < self.quantile < 1.0:
+            raise ConfigError(f"MaterialScale: quantile must be in (0, 1), got {self.quantile!r}")
+        self._check_clip()
+
+    def bounds(self, sampled: np.ndarray) -> tuple[float, float]:
+        try:
+            from skimage.filters import threshold_otsu
+        except ImportError as error:
+            raise ConfigError('MaterialScale needs scikit-image: pip install "xrayraster[ml]"') from error
+        sampled = np.asarray(sampled, np.float64).ravel()
+        material = sampled[sampled > threshold_otsu(sampled)] if np.ptp(sampled) > 0 else sampled
+        return 0.0, float(max(np.quantile(material, self.quantile), 1e-6))  # an empty volume: no division by 0
+
+
+@dataclass(frozen=True)
 class Patch:
     """Where item ``item`` lies: sample ``sample``, crop start (z, y, x) voxels, the label its
     centre was drawn on (None: placed uniformly) and the axes flipped."""
@@ -131,7 +162,7 @@ class PatchDataset:
         self.class_shares = _shares(class_shares, self.dataset.labels)
         self.normalize = Percentiles() if normalize is None else normalize
         if not isinstance(self.normalize, _Intensity):
-            raise ConfigError(f"normalize must be a Window or Percentiles, got {normalize!r}")
+            raise ConfigError(f"normalize must be a Window, Percentiles or MaterialScale, got {normalize!r}")
         self.flips = bool(flips)
         self.seed = int(seed)
         self.epoch = 0
