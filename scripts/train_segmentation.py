@@ -11,11 +11,11 @@ methods users try first (docs/ml.md).
    set (its seed + 1000: 10 other scans from the same ranges), scored only after every choice here
    (the normalisation, the post-processing) was fixed by the shifted set's scores: a choice fitted
    to those 10 scans would show as a gap between the two. ``--train-file`` trains on another dataset
-   file of examples/ instead (docs/ml.md: ml_train_randomized.toml).
-2. **Network.** MONAI's 3-D ``UNet`` (channels 16-128, strides 2, two residual units), one input
-   channel (0 cm⁻¹ mapped to 0 and the median of the volume's material to 1, clipped to -0.25 and
-   1.5: ``xr.ml.MaterialScale()``), one output per label of the
-   training build (air, matrix, weft, warp); Dice + cross-entropy loss (MONAI's ``DiceCELoss``),
+   file of examples/ instead (docs/ml.md: ml_train_scanner.toml, ml_train_randomized.toml).
+2. **Network.** MONAI's 3-D ``UNet`` (``--channels``: the width of each level, 16-128 by default;
+   strides 2, two residual units), one input channel (0 cm⁻¹ mapped to 0 and the median of the
+   volume's material to 1, clipped to -0.25 and 1.5: ``xr.ml.MaterialScale()``), one output per
+   label of the training build (air, matrix, weft, warp); Dice + cross-entropy loss (MONAI's ``DiceCELoss``),
    Adam at 2e-3 with cosine decay, ``--iterations`` batches of ``--batch`` patches of ``--patch``³
    voxels (:class:`xrayraster.ml.PatchDataset`: balanced over the labels, flipped). Seeded, with
    deterministic kernels and a fixed thread count, so a rerun trains the same network.
@@ -72,6 +72,8 @@ def main(argv=None) -> int:
     ap.add_argument("--batch", type=int, default=2, help="patches a batch (default 2)")
     ap.add_argument("--patch", type=int, help="patch side in voxels (default 64; --quick: 32)")
     ap.add_argument("--seed", type=int, default=0, help="the training's seed (default 0)")
+    ap.add_argument("--channels", default="16,32,64,128",
+                    help="the U-Net's channels at each level, comma-separated (default 16,32,64,128)")
     ap.add_argument("--augment", action="store_true", help="augment each patch (module docstring; off by default)")
     ap.add_argument("--train-file", default=BUILDS["train"][0],
                     help="the training set's dataset file in examples/ (default ml_train.toml)")
@@ -104,12 +106,13 @@ def main(argv=None) -> int:
     classes = max(train.dataset.labels) + 1
     augment = augmentation(patch, args.seed) if args.augment else None
     start = time.perf_counter()
-    model, losses = fit(torch, train, classes, iterations, args.batch, args.seed, augment)
+    channels = tuple(int(c) for c in args.channels.split(","))
+    model, losses = fit(torch, train, classes, channels, iterations, args.batch, args.seed, augment)
     seconds["training"] = time.perf_counter() - start
     say(f"training: {iterations} batches of {args.batch} × {patch}³ in {seconds['training']:.0f} s "
         f"({seconds['training'] / iterations:.2f} s a batch); loss {np.mean(losses[:20]):.3f} → {np.mean(losses[-20:]):.3f}")
     order = label_order(train)
-    save_model(model, folder, patch, order, NORMALIZE)
+    save_model(model, folder, patch, order, channels, NORMALIZE)
     sets = {"test split": (builds["train"], "test"), "shifted": (builds["shifted"], "test"),
             "shifted, fresh draw": (builds["fresh"], "test")}
     results, examples = {}, {}
@@ -123,20 +126,20 @@ def main(argv=None) -> int:
     plots = curve_plot(losses, args.plots_dir / "ml_curve.png"), slices_plot(examples["shifted"], results["shifted"],
                                                                              args.plots_dir / "ml_slices.png")
     payload = {"command": command, "machine": machine, "iterations": iterations, "batch": args.batch, "patch": patch,
-               "seed": args.seed, "train_file": args.train_file, "augment": args.augment, "normalize": repr(NORMALIZE),
-               "classes": classes, "train_samples": len(train.samples), "seconds": seconds,
+               "seed": args.seed, "channels": channels, "train_file": args.train_file, "augment": args.augment,
+               "normalize": repr(NORMALIZE), "classes": classes, "train_samples": len(train.samples), "seconds": seconds,
                "loss_first_20": float(np.mean(losses[:20])), "loss_last_20": float(np.mean(losses[-20:])),
                "results": results, "plots": [str(p) for p in plots if p]}
     conclude(args.json, payload, machine, t_start)
     return 0
 
 
-def fit(torch, train, classes: int, iterations: int, batch: int, seed: int, augment=None):
+def fit(torch, train, classes: int, channels: tuple, iterations: int, batch: int, seed: int, augment=None):
     """MONAI's UNet trained for ``iterations`` batches (module docstring), each patch passed through
     ``augment`` (:func:`augmentation`) when given; returns the network and the losses."""
     from monai.losses import DiceCELoss
 
-    model = make_model(classes)
+    model = make_model(classes, channels)
     loss_of = DiceCELoss(to_onehot_y=True, softmax=True)
     optimiser = torch.optim.Adam(model.parameters(), lr=2e-3)
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimiser, iterations)
@@ -188,21 +191,22 @@ def augmented(torch, augment, image, labels):
             torch.stack([d["label"].as_tensor()[0] for d in items]).long())
 
 
-def make_model(classes: int):
-    """The network (module docstring), untrained."""
+def make_model(classes: int, channels: tuple):
+    """The network (module docstring) with ``channels`` at its levels, untrained."""
     from monai.networks.nets import UNet
 
-    return UNet(spatial_dims=3, in_channels=1, out_channels=classes, channels=(16, 32, 64, 128), strides=(2, 2, 2),
-                num_res_units=2)
+    return UNet(spatial_dims=3, in_channels=1, out_channels=classes, channels=channels,
+                strides=(2,) * (len(channels) - 1), num_res_units=2)
 
 
-def save_model(model, folder: Path, patch: int, order: list[int], normalize) -> None:
-    """``model.pt`` (the weights) and ``model.json`` (what scoring needs: the patch, the label order
-    and the normalisation)."""
+def save_model(model, folder: Path, patch: int, order: list[int], channels: tuple, normalize) -> None:
+    """``model.pt`` (the weights) and ``model.json`` (what scoring needs: the patch, the label order,
+    the network's channels and the normalisation)."""
     import torch
 
     torch.save(model.state_dict(), folder / "model.pt")
-    info = {"patch": patch, "order": order, "normalize": [type(normalize).__name__, dataclasses.asdict(normalize)]}
+    info = {"patch": patch, "order": order, "channels": list(channels),
+            "normalize": [type(normalize).__name__, dataclasses.asdict(normalize)]}
     (folder / "model.json").write_text(json.dumps(info) + "\n")
 
 
@@ -211,7 +215,7 @@ def load_model(folder: Path):
     import torch
 
     info = json.loads((folder / "model.json").read_text())
-    model = make_model(len(info["order"]))
+    model = make_model(len(info["order"]), tuple(info["channels"]))
     model.load_state_dict(torch.load(folder / "model.pt"))
     kind, fields = info["normalize"]
     normalize = getattr(xr.ml, kind)(**{k: tuple(v) if isinstance(v, list) else v for k, v in fields.items()})

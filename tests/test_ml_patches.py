@@ -176,7 +176,6 @@ def test_the_material_scale_is_the_bulk_and_a_minority_barely_moves_it():
     """Air and a material of known median: MaterialScale maps 0 cm⁻¹ to 0 and that median to 1.
     1 % of glass-bright voxels, or a slab of plastic a little darker than the material filling 10 %
     of the grid, moves it by under 1.5 %; the bright voxels move the default Percentiles' 98th by more."""
-    pytest.importorskip("skimage", reason="MaterialScale's threshold is scikit-image's: pip install scikit-image")
     rng = np.random.default_rng(1)
     air = rng.random((48, 48, 48)) < 0.4
     volume = np.where(air, rng.normal(0.0, 0.01, air.shape), rng.normal(0.5, 0.03, air.shape)).astype(np.float32)
@@ -195,6 +194,21 @@ def test_the_material_scale_is_the_bulk_and_a_minority_barely_moves_it():
     assert xr.ml.MaterialScale().bounds(np.zeros(64, np.float32)) == (0.0, 1e-6)
     with pytest.raises(ConfigError, match=r"MaterialScale: quantile must be in \(0, 1\)"):
         xr.ml.MaterialScale(quantile=1.0)
+
+
+@pytest.mark.parametrize("air_share, glass_share", [(0.1, 0.0), (0.1, 0.06), (0.4, 0.03), (0.4, 0.06), (0.8, 0.01)])
+def test_a_bright_minority_does_not_take_the_material_scale_over(air_share, glass_share):
+    """Air, a composite at 0.45 cm⁻¹ and glass at 1.9 cm⁻¹ (up to a tenth of the material): the
+    scale is the composite's median within 2 % (a median moves by the glass's share, not by its
+    values). With 40 % air and 3 % glass, Otsu's two-class threshold splits the glass from the rest,
+    so a scale taken above it would be the glass's 1.9."""
+    rng = np.random.default_rng(2)
+    draw = rng.random(200_000)
+    composite = rng.normal(0.45, 0.04, draw.shape)
+    sampled = np.where(draw < air_share, rng.normal(0.0, 0.05, draw.shape),
+                       np.where(draw < 1.0 - glass_share, composite, rng.normal(1.9, 0.1, draw.shape)))
+    middle = (draw >= air_share) & (draw < 1.0 - glass_share)
+    assert xr.ml.MaterialScale().bounds(sampled)[1] == pytest.approx(np.median(sampled[middle]), rel=0.02)
 
 
 @pytest.mark.parametrize("options, message", [
