@@ -15,8 +15,8 @@ methods users try first (docs/ml.md).
 2. **Network.** MONAI's 3-D ``UNet`` (``--channels``: the width of each level, 16-128 by default;
    strides 2, two residual units), one input channel (0 cm⁻¹ mapped to 0 and the median of the
    volume's material to 1, clipped to -0.25 and 1.5: ``xr.ml.MaterialScale()``), one output per
-   label of the training build (air, matrix, weft, warp); Dice + cross-entropy loss (MONAI's ``DiceCELoss``),
-   Adam at 2e-3 with cosine decay, ``--iterations`` batches of ``--batch`` patches of ``--patch``³
+   label of the training build (air, matrix, weft, warp); Dice + cross-entropy loss (MONAI's
+   ``DiceCELoss``), Adam at 2e-3 with cosine decay, ``--iterations`` batches of ``--batch`` patches of ``--patch``³
    voxels (:class:`xrayraster.ml.PatchDataset`: balanced over the labels, flipped). Seeded, with
    deterministic kernels and a fixed thread count, so a rerun trains the same network.
    ``--augment`` (off by default: it scored lower here, docs/ml.md) adds MONAI's transforms after
@@ -105,8 +105,8 @@ def main(argv=None) -> int:
                                flips=True, seed=args.seed, normalize=NORMALIZE).prepare()
     classes = max(train.dataset.labels) + 1
     augment = augmentation(patch, args.seed) if args.augment else None
-    start = time.perf_counter()
     channels = tuple(int(c) for c in args.channels.split(","))
+    start = time.perf_counter()
     model, losses = fit(torch, train, classes, channels, iterations, args.batch, args.seed, augment)
     seconds["training"] = time.perf_counter() - start
     say(f"training: {iterations} batches of {args.batch} × {patch}³ in {seconds['training']:.0f} s "
@@ -127,7 +127,8 @@ def main(argv=None) -> int:
                                                                              args.plots_dir / "ml_slices.png")
     payload = {"command": command, "machine": machine, "iterations": iterations, "batch": args.batch, "patch": patch,
                "seed": args.seed, "channels": channels, "train_file": args.train_file, "augment": args.augment,
-               "normalize": repr(NORMALIZE), "classes": classes, "train_samples": len(train.samples), "seconds": seconds,
+               "normalize": repr(NORMALIZE), "classes": classes, "train_samples": len(train.samples),
+               "seconds": seconds,
                "loss_first_20": float(np.mean(losses[:20])), "loss_last_20": float(np.mean(losses[-20:])),
                "results": results, "plots": [str(p) for p in plots if p]}
     conclude(args.json, payload, machine, t_start)

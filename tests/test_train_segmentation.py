@@ -13,8 +13,8 @@ from scripts.common import ROOT
 
 from scripts import ml_shift_ablation, train_segmentation
 
-METHODS = {"network", "network, every body kept", "multi-Otsu, median 3³", "multi-Otsu, Gaussian σ 1", "Gaussian mixture, median 3³",
-           "Gaussian mixture, Gaussian σ 1"}
+METHODS = {"network", "network, every body kept", "multi-Otsu, median 3³", "multi-Otsu, Gaussian σ 1",
+           "Gaussian mixture, median 3³", "Gaussian mixture, Gaussian σ 1"}
 
 
 def test_baselines_recover_well_separated_classes_and_dice_counts_overlap(torch):
@@ -105,6 +105,7 @@ def test_no_training_range_reaches_the_shifted_sets(train_file):
             continue
         low, high = min(a for a, _ in trained), max(b for _, b in trained)
         for a, b in held_out:
-            assert b <= low or a >= high, f"{train_file}: {key} = {train[key]} reaches the shifted set's {shifted[key]}"
+            assert b <= low or a >= high, \
+                f"{train_file}: {key} = {train[key]} reaches the shifted set's {shifted[key]}"
         compared += 1
     assert compared >= 8, f"{train_file}: only {compared} ranges compared"

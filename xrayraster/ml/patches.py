@@ -132,7 +132,7 @@ class MaterialScale(_Intensity):
             if halfway <= threshold:
                 break
             threshold = halfway
-        material = sampled[sampled > threshold]
+        material = sampled[above]
         high = np.quantile(material, self.quantile) if material.size else 0.0
         return 0.0, float(max(high, 1e-6))  # an empty or all-negative volume: no division by 0
 
