@@ -261,7 +261,7 @@ def save(fig, path: Path) -> Path:
 
 
 # ---------------------------------------------------------------------------------------------
-# A headless browser (the preview's page: tests/test_preview_browser.py, scripts/bench_preview.py)
+# A headless browser (the preview's page: tests/test_preview.py, scripts/bench_preview.py)
 # ---------------------------------------------------------------------------------------------
 
 CHROMIUM, CHROMEDRIVER = "/usr/bin/chromium", "/usr/bin/chromedriver"  # Debian's chromium, chromium-driver

@@ -1,7 +1,9 @@
 """Shared fixtures. Capabilities (a GL driver, the OSMesa fallback, an OpenCL device) are probed
 once; a missing one skips with the reason, unless XRAYRASTER_REQUIRE_GL=1 /
 XRAYRASTER_REQUIRE_OSMESA=1 / XRAYRASTER_REQUIRE_OPENCL=1 / XRAYRASTER_REQUIRE_BROWSER=1 /
-XRAYRASTER_REQUIRE_TORCH=1 (set by .ci/run), which turn that skip into a failure."""
+XRAYRASTER_REQUIRE_TORCH=1 (set by .ci/run), which turn that skip into a failure. Tests that take the
+``torch`` fixture are marked ``needs_torch``: .ci/run runs the README's plain ``pytest`` first, in an
+environment without the ml extra, and then ``pytest -m needs_torch`` once the extra is installed."""
 
 from __future__ import annotations
 
@@ -68,6 +70,12 @@ def browser():
         _require("BROWSER", f"Chromium did not start: {str(exc).splitlines()[0]}")
     yield driver
     driver.quit()
+
+
+def pytest_collection_modifyitems(items):
+    for item in items:
+        if "torch" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.needs_torch)
 
 
 @pytest.fixture(scope="session")

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import re
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -120,3 +121,29 @@ def test_every_command_refuses_a_bad_input_file_in_one_line(request, tmp_path, c
     what = {"binary": r"binary|as a TIFF|no triangles", "latin-1": r"not UTF-8|as a TIFF|no triangles",
             "directory": "is a directory", "missing": "no such file"}[kind]
     assert re.search(what, lines[0]), err
+
+
+@pytest.mark.parametrize("suffix", ["stl", "obj"])
+@pytest.mark.parametrize("kind", ["binary", "latin-1"])
+def test_a_mesh_file_that_is_not_text_is_named_without_charset_normalizer(monkeypatch, tmp_path, suffix, kind):
+    """trimesh guesses a non-UTF-8 text's encoding only when charset_normalizer is installed (a fresh
+    `pip install ".[test]"` has none): what the file holds is said the same on every install."""
+    monkeypatch.setitem(sys.modules, "charset_normalizer", None)  # `import charset_normalizer` now fails
+    path = tmp_path / f"part.{suffix}"
+    _bad(kind, path, "solid part\nendsolid part\n" if suffix == "stl" else "v 0 0 0\n")
+    with pytest.raises(xr.MeshError) as caught:
+        xr.load_mesh(path, name="part")
+    message = str(caught.value)
+    assert str(path) in message and "charset_normalizer" not in message
+    assert re.search({"binary": "binary", "latin-1": r"not UTF-8 text \(byte 0xe9 at offset 3\)"}[kind], message)
+
+
+def test_a_binary_stl_reads_as_the_triangles_it_holds(tmp_path):
+    """The binary-STL check lets a real one through: a tetrahedron written by hand, byte by byte."""
+    vertices = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], np.float32)
+    faces = [(0, 2, 1), (0, 1, 3), (0, 3, 2), (1, 2, 3)]
+    body = b"".join(np.zeros(3, "<f4").tobytes() + vertices[list(f)].astype("<f4").tobytes() + b"\0\0" for f in faces)
+    path = tmp_path / "tetra.stl"
+    path.write_bytes(b"\0" * 80 + len(faces).to_bytes(4, "little") + body)
+    mesh = xr.load_mesh(path)
+    assert len(mesh.faces) == 4 and mesh.volume == pytest.approx(1 / 6)

@@ -267,11 +267,10 @@ def test_a_voxelwise_model_is_stitched_to_the_voxelwise_answer():
     np.testing.assert_array_equal(small, expected[:5, :6, :7])
 
 
-def test_windows_blend_as_monais_sliding_window_inference():
+def test_windows_blend_as_monais_sliding_window_inference(torch):
     """A model whose scores depend on where a voxel lies in its patch (a zero-padded box filter):
     our uniform blend equals MONAI's "constant" mode (the same windows, the same average)."""
-    torch = pytest.importorskip("torch", reason="MONAI's blend is the reference: pip install torch monai")
-    monai_inferers = pytest.importorskip("monai.inferers", reason="pip install monai")
+    from monai import inferers as monai_inferers
     volume = np.random.default_rng(1).random((21, 30, 26)).astype(np.float32)
     weights = torch.ones(2, 1, 3, 3, 3) * torch.tensor([1.0, -0.5]).view(2, 1, 1, 1, 1)
 

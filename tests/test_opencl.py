@@ -17,6 +17,7 @@ def test_fastest_prefers_gpus_then_compute(monkeypatch):
     found = [(_info("0:0", "CPU", 64, name="big cpu"), "cpu"), (_info("1:0", "GPU", 20, name="small gpu"), "gpu"),
              (_info("1:1", "GPU", 80, name="big gpu"), "gpu2")]
     monkeypatch.setattr(opencl, "_devices", lambda: found)
+    monkeypatch.setattr(opencl, "_probe_failure", lambda info, device: None)
     monkeypatch.delenv("XRAYRASTER_CL_DEVICE", raising=False)
     assert opencl.choose_device()[0].name == "big gpu"
     assert opencl.choose_device("0:0")[0].name == "big cpu"
@@ -25,6 +26,27 @@ def test_fastest_prefers_gpus_then_compute(monkeypatch):
     assert opencl.choose_device()[0].name == "big cpu"
     with pytest.raises(OpenCLError, match=r"'tpu' .* matches none of: 0:0 P / big cpu"):
         opencl.choose_device("tpu")
+
+
+def test_a_device_whose_compiler_fails_is_passed_over(monkeypatch):
+    """PyPI's PoCL (LLVM 14) on a CPU its LLVM does not know fails every build: the next device is
+    chosen, and with none left the error says how to get a compiler that knows the CPU."""
+    found = [(_info("0:0", "CPU", 2, name="new pocl"), "new"), (_info("1:0", "CPU", 4, name="old pocl"), "old")]
+    monkeypatch.setattr(opencl, "_devices", lambda: found)
+    monkeypatch.delenv("XRAYRASTER_CL_DEVICE", raising=False)
+    failing = {"old": "error: unknown target CPU 'generic'"}
+    monkeypatch.setattr(opencl, "_probe_failure", lambda info, device: failing.get(device))
+    assert opencl.choose_device()[0].name == "new pocl"  # the faster "old pocl" cannot compile
+    failing["new"] = "error: something else"
+    with pytest.raises(OpenCLError, match=r"no OpenCL device compiles a kernel \(1:0 P / old pocl .*unknown target "
+                                          r"CPU 'generic'; 0:0 P / new pocl .*apt-get install pocl-opencl-icd"):
+        opencl.choose_device()
+
+
+def test_the_chosen_device_compiles_a_kernel(cl):
+    """Whatever this machine has (PyPI's PoCL, a distribution's, a GPU), the default device builds and runs."""
+    info, device = opencl.choose_device()
+    assert opencl._probe_failure(info, device) is None
 
 
 def test_no_platform_says_how_to_install_pocl(monkeypatch):

@@ -12,7 +12,7 @@ from .errors import ConfigError
 from .tiff import read_tiff
 
 # Bytes no text file holds: a NUL says binary even when the rest happens to decode as UTF-8.
-_BINARY_MARK = b"\x00"
+BINARY_MARK = b"\x00"
 
 
 def check_input_file(path, what: str, error: type[Exception] = ConfigError) -> Path:
@@ -34,12 +34,23 @@ def read_text_file(path, what: str, error: type[Exception] = ConfigError) -> str
     """The text of the user's file ``path``, decoded as UTF-8; a leading byte-order mark (as some
     Windows editors write) is dropped. A path :func:`check_input_file` refuses, a binary file or
     text in another encoding (latin-1) is ``error`` naming the file, in one line."""
+    return decode_text(read_file_bytes(path, what, error), path, what, error)
+
+
+def read_file_bytes(path, what: str, error: type[Exception] = ConfigError) -> bytes:
+    """The bytes of the user's file ``path``: a path :func:`check_input_file` refuses, or a read that
+    fails (raced away, an I/O error), is ``error`` naming the file."""
     path = check_input_file(path, what, error)
     try:
-        data = path.read_bytes()
-    except OSError as exc:  # raced away, or an I/O error on the device
+        return path.read_bytes()
+    except OSError as exc:
         raise error(f"{what} {path}: cannot be read ({exc.strerror or exc})") from None
-    if _BINARY_MARK in data:
+
+
+def decode_text(data: bytes, path, what: str, error: type[Exception] = ConfigError) -> str:
+    """``data``, the bytes of the user's file ``path``, as UTF-8 text (a byte-order mark dropped);
+    a binary file or text in another encoding is ``error`` naming the file and the byte at fault."""
+    if BINARY_MARK in data:
         raise error(f"{what} {path}: is a binary file, not text; give the {what} itself (UTF-8 text)")
     try:
         return data.decode("utf-8-sig")

@@ -5,10 +5,12 @@ Device choice, in order:
 1. the ``device`` argument, else the ``XRAYRASTER_CL_DEVICE`` environment variable: either
    ``"P:D"`` (platform and device indices as :func:`list_devices` prints them) or a
    case-insensitive piece of ``"<platform name> <device name>"`` (e.g. ``"nvidia"``, ``"pocl"``);
-2. otherwise the fastest device: GPUs before accelerators before CPUs, then the most compute
-   units × clock.
+2. otherwise the fastest device that compiles a kernel: GPUs before accelerators before CPUs,
+   then the most compute units × clock. A device whose compiler fails is passed over: PyPI's PoCL
+   (LLVM 14) cannot compile for a CPU its LLVM does not know (AMD Zen 5 is "unknown target CPU
+   'generic'"), where a distribution's newer PoCL beside it can.
 
-Without an OpenCL driver the error says how to get one (PoCL from PyPI runs on any CPU).
+Without an OpenCL driver, or with none that compiles, the error says how to get one.
 """
 
 from __future__ import annotations
@@ -29,6 +31,13 @@ INSTALL_HINT = (
     "xrayraster reconstructs with OpenCL. Install a driver: 'pip install pocl-binary-distribution' "
     "(PoCL, runs on any CPU) or the GPU vendor's OpenCL driver (an ICD, e.g. NVIDIA's driver or ROCm)."
 )
+COMPILER_HINT = (
+    "A CPU newer than the LLVM of PyPI's PoCL ('unknown target CPU') needs a newer PoCL: on Debian or Ubuntu, "
+    "'apt-get install pocl-opencl-icd'; or a GPU vendor's OpenCL driver."
+)
+# The smallest kernel that exercises the device's compiler and its built-in library (sqrt).
+_PROBE_SOURCE = "__kernel void probe(__global float *x) { x[get_global_id(0)] = sqrt(2.0f); }"
+_probe_failures: dict[str, str | None] = {}  # device index -> why it cannot compile (None: it can)
 
 
 @dataclass(frozen=True)
@@ -95,7 +104,7 @@ def choose_device(request: str | None = None):
     request = request or os.environ.get("XRAYRASTER_CL_DEVICE") or None
     found = _devices()
     if request is None:
-        return max(found, key=lambda item: _rank(item[0]))
+        return _first_that_compiles(sorted(found, key=lambda item: _rank(item[0]), reverse=True))
     request = request.strip()
     if re.fullmatch(r"\d+:\d+", request):
         match = [item for item in found if item[0].index == request]
@@ -105,6 +114,31 @@ def choose_device(request: str | None = None):
         listing = "; ".join(str(info) for info, _ in found)
         raise OpenCLError(f"OpenCL device {request!r} (device option or XRAYRASTER_CL_DEVICE) matches none of: {listing}")
     return max(match, key=lambda item: _rank(item[0]))
+
+
+def _first_that_compiles(ranked):
+    """The first of ``ranked`` (DeviceInfo, device) pairs whose compiler builds a probe kernel."""
+    failures = []
+    for info, device in ranked:
+        why = _probe_failure(info, device)
+        if why is None:
+            return info, device
+        log.info("OpenCL device %s passed over: %s", info, why)
+        failures.append(f"{info}: {why}")
+    raise OpenCLError(f"no OpenCL device compiles a kernel ({'; '.join(failures)}). {COMPILER_HINT}")
+
+
+def _probe_failure(info: DeviceInfo, device) -> str | None:
+    """Why ``device`` cannot build a kernel (its compiler's first complaint), or None; once a process."""
+    if info.index not in _probe_failures:
+        cl = _cl()
+        try:
+            cl.Program(cl.Context([device]), _PROBE_SOURCE).build()
+            _probe_failures[info.index] = None
+        except cl.Error as exc:
+            log_lines = [line.strip() for line in str(exc).splitlines() if "error" in line.lower()]
+            _probe_failures[info.index] = (log_lines[-1] if log_lines else str(exc).splitlines()[0])[:200]
+    return _probe_failures[info.index]
 
 
 class CLContext:
@@ -131,7 +165,8 @@ class CLContext:
             try:
                 self._programs[source, options] = cl.Program(self.ctx, read_shader(source)).build(options=list(options))
             except cl.RuntimeError as exc:
-                raise OpenCLError(f"OpenCL kernel {source} failed to build on {self.info}: {exc}") from None
+                raise OpenCLError(f"OpenCL kernel {source} failed to build on {self.info}: {exc}"
+                                  + (f". {COMPILER_HINT}" if "unknown target CPU" in str(exc) else "")) from None
         program = self._programs[source, options]
         if (source, options, name) not in self._kernels:
             if name not in program.kernel_names.split(";"):

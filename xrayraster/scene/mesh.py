@@ -8,16 +8,23 @@ only inside out is flipped silently).
 
 from __future__ import annotations
 
+import io
 import os
 import warnings
 from dataclasses import dataclass
 from functools import cached_property
+from pathlib import Path
 
 import numpy as np
 
 from ..core.errors import MeshError
-from ..core.inputs import check_input_file
+from ..core.inputs import BINARY_MARK, decode_text, read_file_bytes
 from ..core.transform import Transform
+
+# A binary STL: an 80-byte header, a little-endian uint32 triangle count, then 50 bytes a triangle.
+_STL_HEADER_BYTES, _STL_TRIANGLE_BYTES = 84, 50
+# Mesh formats that are text throughout (an ASCII STL, when it is not a binary one).
+_TEXT_MESH_FORMATS = ("stl", "obj", "off")
 
 
 @dataclass(frozen=True, eq=False)
@@ -80,13 +87,33 @@ def load_mesh(source, *, name: str = "mesh", transform: Transform | None = None,
     return mesh
 
 
+def _mesh_file_bytes(path, name: str) -> tuple[bytes, str]:
+    """The bytes of mesh file ``path`` and its format (its suffix), with text formats checked here:
+    trimesh guesses a non-UTF-8 file's encoding only when charset_normalizer happens to be
+    installed, and reads binary bytes as text, so what a file holds is said here, the same on
+    every install. A binary STL passes as it is."""
+    what = f"object {name!r}: mesh file"
+    data = read_file_bytes(path, what, MeshError)
+    file_type = Path(path).suffix.lower().lstrip(".")
+    if file_type == "stl" and len(data) >= _STL_HEADER_BYTES:
+        triangles = int.from_bytes(data[_STL_HEADER_BYTES - 4:_STL_HEADER_BYTES], "little")
+        if len(data) == _STL_HEADER_BYTES + _STL_TRIANGLE_BYTES * triangles:
+            return data, file_type
+        if BINARY_MARK in data:
+            raise MeshError(f"{what} {path}: holds binary data that is not a binary STL ({len(data)} bytes, not "
+                            f"84 + 50 × the {triangles} triangles its header counts); give an STL, OBJ or PLY mesh")
+    if file_type in _TEXT_MESH_FORMATS:
+        decode_text(data, path, what, MeshError)
+    return data, file_type
+
+
 def _read(source, name: str) -> tuple[np.ndarray, np.ndarray]:
     if isinstance(source, (str, os.PathLike)):
         import trimesh
 
-        check_input_file(source, f"object {name!r}: mesh file", MeshError)
+        data, file_type = _mesh_file_bytes(source, name)
         try:
-            loaded = trimesh.load(source, force="mesh", process=False)
+            loaded = trimesh.load(io.BytesIO(data), file_type=file_type, force="mesh", process=False)
         except Exception as exc:  # trimesh raises many types for unreadable files
             raise MeshError(f"object {name!r}: cannot read mesh file {os.fspath(source)!r}: {exc}") from exc
         if len(loaded.faces) == 0:  # trimesh reads bytes that are no mesh (or text in another format) as empty
