@@ -95,7 +95,7 @@ def main(argv=None) -> int:
         dataset = load_dataset_file(ROOT / "examples" / (args.train_file if name == "train" else file))
         dataset = dataclasses.replace(dataset, seed=dataset.seed + reseed, count=count if args.quick else dataset.count)
         start = time.perf_counter()
-        xr.build(dataset, folder / name, workers=2)
+        xr.build(dataset, folder / name, workers=min(2, dataset.count))  # no more processes than samples
         seconds[f"build {name}"] = time.perf_counter() - start
         builds[name] = folder / name
         say(f"build {name}: {dataset.count} samples in {seconds[f'build {name}']:.0f} s (0 s: built before)")

@@ -354,6 +354,9 @@ def test_messages_show_plain_numbers():
         fields.vector([1, np.float32(2.5)], "box", "w", 3, "[x, y, z]")
     assert str(exc.value) == "w: box must be [x, y, z], got [1, 2.5]"
     assert fields.number(np.float32(0.5), "x", "w") == 0.5  # a numpy number is a number
+    with pytest.raises(ConfigError) as exc:  # TOML integers have no bound; float() of this one overflows
+        fields.number(10**400, "kvp", "s.toml [source]")
+    assert str(exc.value) == "s.toml [source]: kvp must be finite, got 100...(401 digits)"
     with pytest.raises(GeometryError) as exc:
         validate.finite("pixel_size", -0.0, positive=True)
     assert str(exc.value) == "pixel_size must be > 0, got 0.0"

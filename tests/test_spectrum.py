@@ -256,6 +256,8 @@ def test_missing_file(tmp_path):
         ({"kvp": 5}, "kvp"),
         ({"kvp": 80, "anode": "Mo"}, "kvp"),  # Mo: 10–50 kV
         ({"kvp": float("nan")}, "kvp"),
+        ({"kvp": 1e308}, "kvp"),  # finite, but kvp / bin_kev is not: refused before the bins are counted
+        ({"kvp": -5}, "kvp"),
         ({"kvp": 40, "filters": {"Al": -1.0}}, r"filters\['Al'\]"),
         ({"kvp": 40, "mas": 0.0}, "mas"),
         ({"kvp": 40, "bin_kev": 0.0}, "bin_kev"),

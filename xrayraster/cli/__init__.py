@@ -14,8 +14,10 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import signal
 import sys
+import threading
 import traceback
 import warnings
 
@@ -53,8 +55,8 @@ def main(argv=None) -> int:
             warnings.showwarning = _show_warning
             warnings.simplefilter("always", XrayrasterWarning)  # each run says it, not only a process's first
             return args.run(args)
-    except KeyboardInterrupt:
-        return _interrupted()
+    except KeyboardInterrupt as exc:
+        return _interrupted(exc)
     except Exception as exc:
         if interrupts.received():  # third-party code turned the interrupt into another exception
             return _interrupted()
@@ -65,16 +67,29 @@ def main(argv=None) -> int:
 
 def run() -> int:
     """The console script and ``python -m xrayraster``: :func:`main` as the whole process, so a
-    signal after the command has finished (while the process shuts down) is ignored."""
+    signal after the command has finished (while the process shuts down) is ignored.
+
+    A thread the command abandoned, still running (marked ``abandoned``: the preview's render
+    thread, stopped mid-frame, which Python cannot stop), may be inside a C library: tearing the
+    interpreter down under it prints that library's leak reports or waits on its driver, so the
+    process then ends at once with the command's status, its output flushed."""
     interrupts.exit_when_done()
-    return main()
+    status = main()
+    if any(getattr(thread, "abandoned", False) and thread.is_alive() for thread in threading.enumerate()):
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(status)
+    return status
 
 
-def _interrupted() -> int:
+def _interrupted(exc: BaseException | None = None) -> int:
+    """Say so; what the command kept is the interrupt's note (a dataset build's finished samples),
+    by default nothing under its final name."""
     interrupts.handled()
     signum = interrupts.received() or signal.SIGINT  # a KeyboardInterrupt raised without a signal
     what = "terminated" if signum == signal.SIGTERM else "interrupted"
-    print(f"xrayraster: {what}; no output written under its final name", file=sys.stderr)
+    kept = "; ".join(getattr(exc, "__notes__", ())) or "no output written under its final name"
+    print(f"xrayraster: {what}; {one_line(kept)}", file=sys.stderr)
     return 128 + signum
 
 

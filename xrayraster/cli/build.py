@@ -3,7 +3,9 @@
 Resumable: a rerun skips the finished samples and redoes partial ones; ``count`` may grow; any
 other change of the dataset file against ``DIR`` is refused unless ``--force``. ``--plan`` draws and
 checks every sample and prints their parameters with the predicted time and disk use, scanning
-nothing. Exit status 1 when a sample failed twice (``DIR/failed.csv`` says which and why).
+nothing; a line a sample as it is drawn, and above 50 samples the first 50 with the totals
+extrapolated. Exit status 1 when a sample failed (``DIR/failed.csv`` says which and why); 2 when an
+input is refused, before anything is written.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ from pathlib import Path
 from ..core.errors import ConfigError
 from ..pipeline.dataset import build
 from ..pipeline.dataset_file import load_dataset_file
-from ..pipeline.dataset_plan import format_plan, plan_rows
+from ..pipeline.dataset_plan import plan_lines
 from .options import positive_int
 
 
@@ -43,7 +45,8 @@ def run(args) -> int:
         logging.getLogger(build.__module__).setLevel(logging.INFO)
     dataset = load_dataset_file(args.dataset)
     if args.plan:
-        print(format_plan(plan_rows(dataset)))
+        for line in plan_lines(dataset):  # each sample's line as it is drawn (0.4 s a draw)
+            print(line, flush=True)
         return 0
     if args.out is None:
         raise ConfigError("-o DIR is required: the directory to build into (or --plan, to build nothing)")
@@ -53,7 +56,7 @@ def run(args) -> int:
           f"{len(report.failed)} failed; {report.seconds:.1f} s"
           + (f" ({3600 * len(report.built) / report.seconds:.0f} samples/h)" if report.built and report.seconds else ""))
     if report.failed:
-        print(f"xrayraster: error: {len(report.failed)} samples failed twice; see {report.directory / 'failed.csv'}",
-              file=sys.stderr)
+        print(f"xrayraster: error: {len(report.failed)} samples failed; see {report.directory / 'failed.csv'} "
+              "(rerun the same command to retry them)", file=sys.stderr)
         return 1
     return 0

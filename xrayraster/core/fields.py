@@ -29,7 +29,11 @@ def required(table: dict, key: str, where: str):
 def number(value, field: str, where: str, *, positive: bool = False, nonnegative: bool = False) -> float:
     if isinstance(value, bool) or not isinstance(value, numbers.Real):  # numpy scalars too
         raise ConfigError(f"{where}: {field} must be a number, got {show(value)}")
-    if not math.isfinite(value):
+    try:
+        finite = math.isfinite(value)
+    except OverflowError:  # an integer beyond float's range (TOML and JSON integers have no bound)
+        finite = False
+    if not finite:
         raise ConfigError(f"{where}: {field} must be finite, got {show(value)}")
     if positive and value <= 0:
         raise ConfigError(f"{where}: {field} must be > 0, got {show(value)}")

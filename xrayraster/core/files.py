@@ -103,7 +103,7 @@ def _remove_temporaries(paths) -> list[Path]:
     removed = []
     for tmp in paths:
         try:
-            _remove_entry(tmp)  # a file, or an atomic_directory's folder
+            remove_entry(tmp)  # a file, or an atomic_directory's folder
             removed.append(tmp)
         except FileNotFoundError:  # another writer of the same output removed it first
             pass
@@ -284,7 +284,7 @@ def _swap(tmp: Path, target: Path, marker: str, generator: str) -> None:
     os.replace(tmp, target)
     recorded, _ = directory_entries(old, marker, generator)
     for name in recorded:  # those the directory holds
-        _remove_entry(old / name)
+        remove_entry(old / name)
     try:
         old.rmdir()
     except OSError:  # something appeared in the old directory meanwhile: it is not ours to delete
@@ -298,12 +298,13 @@ def _merge(tmp: Path, target: Path, written: list[str], marker: str, generator: 
         if name != marker:
             os.replace(tmp / name, target / name)
     for name in before - set(written):
-        _remove_entry(target / name)
+        remove_entry(target / name)
     os.replace(tmp / marker, target / marker)
     tmp.rmdir()
 
 
-def _remove_entry(path: Path) -> None:
+def remove_entry(path: Path) -> None:
+    """Remove a file, or a folder with everything in it (a link is removed, never followed)."""
     if path.is_dir() and not path.is_symlink():
         shutil.rmtree(path)
     else:

@@ -18,6 +18,11 @@ from .files import atomic_write
 from .ownership import SOFTWARE, check_replaceable_files, resolved_output
 from .volume import VolumeGeometry
 
+#: Data above this many bytes cannot be a classic TIFF with an IFD a page (32-bit offsets): it is
+#: written as ImageJ writes big stacks, one IFD and the pages after it, contiguous ("truncated", as
+#: tifffile names it, which reads it whole like ImageJ). The margin is tifffile's own (its BigTIFF
+#: threshold), left for the IFDs and the metadata; below it, the files are as they always were.
+IMAGEJ_CONTIGUOUS_BYTES = 2**32 - 2**25
 QUICKLOOK_MIN_PX = 512  # a quick-look's long side is upscaled (nearest neighbour, integer factor) to at least this
 _BAR_STRIP_PX = 22  # height of the scale-bar strip below the picture
 
@@ -35,9 +40,11 @@ def write_tiff(path, data: np.ndarray, *, axes: str, pixel_size_mm: tuple[float,
     if spacing_mm is not None:
         metadata["spacing"] = float(spacing_mm)
     resolution = (1.0 / pixel_size_mm[1], 1.0 / pixel_size_mm[0])
+    # Said up front for big data: tifffile would do the same after warning "truncating ImageJ file".
+    big = {"truncate": True} if data.nbytes > IMAGEJ_CONTIGUOUS_BYTES else {}
     # The Software tag marks the file as ours (core.ownership): a later write may replace it.
     return atomic_write(path, lambda tmp: tifffile.imwrite(tmp, data, imagej=True, metadata=metadata,
-                                                           resolution=resolution, software=SOFTWARE))
+                                                           resolution=resolution, software=SOFTWARE, **big))
 
 
 def read_tiff(path) -> tuple[np.ndarray, dict]:

@@ -22,7 +22,8 @@ def show(value) -> str:
     if isinstance(value, float):
         return "0.0" if value == 0 else repr(float(value))
     if isinstance(value, int):
-        return repr(int(value))
+        text = repr(int(value))
+        return text if len(text) <= 20 else f"{text[:3]}...({len(text)} digits)"  # a TOML integer has no bound
     if isinstance(value, list):
         return "[" + ", ".join(show(v) for v in value) + "]"
     if isinstance(value, tuple):

@@ -57,7 +57,11 @@ VOLUME_TIF, LABELS_TIF, PROJECTIONS_TIF, MESHES = "volume.tif", "labels.tif", "p
 # bytes in 0.27 s, against lzf 82 % in 0.09 s and gzip 4 unshuffled 72 % in 0.48 s.
 HDF5_CHUNK = 64
 HDF5_FILTERS = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
-_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]*")
+# A dataset's name starts the samples' file names (nnU-Net's NAME_00000_0000.nii.gz): letters, digits
+# and underscores (as dataset files always required), the first not an underscore (a leading "_"
+# reads as a hidden name to some tools). The one rule of the dataset file, --plan and every layout.
+_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_]*")
+NAME_RULE = "letters, digits and underscores, the first a letter or digit (it starts the samples' file names)"
 
 
 class ScanOutput(Protocol):
@@ -70,7 +74,7 @@ class ScanOutput(Protocol):
 
 class DatasetLayout(Protocol):
     """The on-disk layout of a dataset build (module docstring). ``name`` is the dataset's name,
-    the prefix of nnU-Net's case names (letters, digits, ``_`` and ``-``)."""
+    the prefix of nnU-Net's case names (:data:`NAME_RULE`)."""
 
     def write_sample(self, root: Path, index: int, result: ScanOutput, record: dict, *, name: str,
                      projections: Projections | None = None,
@@ -98,6 +102,16 @@ class DatasetLayout(Protocol):
         """Remove the visible files of samples a killed writer left unfinished (the runner calls it
         before a build resumes); returns them. Hidden temporaries are the runner's sweep's."""
 
+    def index_names(self) -> list[str]:
+        """The files :meth:`write_index` writes, relative to the root."""
+
+    def sample_folders(self, index: int, name: str) -> list[tuple[str, str]]:
+        """(folder relative to the root, its marker) of each folder that sample ``index`` writes whole
+        (:func:`~xrayraster.core.files.atomic_directory`): its marker records the files in it."""
+
+    def scan_metadata(self, root: Path, index: int, split: str, name: str) -> dict:
+        """The scan metadata a complete sample stored (its ``scan`` document)."""
+
 
 def sample_id(index: int) -> str:
     """The sample's number in file names: five digits, more when needed (``00042``, ``123456``)."""
@@ -122,9 +136,15 @@ def label_names(labels: dict[int, str]) -> dict[int, str]:
     return {0: "background", **{int(label): str(name) for label, name in labels.items()}}
 
 
+def check_name(name, where: str = "dataset") -> str:
+    """``name`` if it is a dataset name (:data:`NAME_RULE`), else ConfigError naming ``where``."""
+    if not isinstance(name, str) or not _NAME.fullmatch(name):
+        raise ConfigError(f"{where}: name must be {NAME_RULE}, got {name!r}")
+    return name
+
+
 def _check_name(name: str) -> None:
-    if not _NAME.fullmatch(name):
-        raise ConfigError(f"dataset name {name!r}: use letters, digits, _ and - (it starts file names)")
+    check_name(name, "dataset name")
 
 
 def _check_labels(records: dict[int, dict], names: dict[int, str]) -> None:
@@ -152,6 +172,10 @@ def _document(layout: str, stored: dict, result: ScanOutput) -> dict:
 
 def _json(document) -> str:
     return json.dumps(document, indent=2, default=json_ready) + "\n"
+
+
+def _read_json(path: Path) -> dict:
+    return json.loads(path.read_text(encoding="utf-8"))
 
 
 def _remove_stray_extras(root: Path, pattern: str, done: dict) -> list[Path]:
@@ -233,6 +257,15 @@ class TiffLayout:
     def sample_paths(self, index, split, name) -> list[str]:
         return [f"samples/{sample_id(index)}/{file}" for file in (VOLUME_TIF, LABELS_TIF, SAMPLE_JSON)]
 
+    def index_names(self) -> list[str]:
+        return [MANIFEST_CSV]
+
+    def sample_folders(self, index, name) -> list[tuple[str, str]]:
+        return [(f"samples/{sample_id(index)}", SAMPLE_JSON)]
+
+    def scan_metadata(self, root, index, split, name) -> dict:
+        return _read_json(Path(root) / self.sample_paths(index, split, name)[2])["scan"]
+
     def remove_unfinished(self, root, name) -> list[Path]:
         return []  # the sample's folder, extras inside, appears by one rename, whole
 
@@ -258,6 +291,15 @@ class NnunetLayout:
     def sample_paths(self, index, split, name) -> list[str]:
         case, part = self.case(index, name), "Tr" if split in TRAINING_SPLITS else "Ts"
         return [f"images{part}/{case}_0000.nii.gz", f"labels{part}/{case}.nii.gz", f"records/{case}.json"]
+
+    def index_names(self) -> list[str]:
+        return [MANIFEST_CSV, SPLITS_JSON, DATASET_JSON]
+
+    def sample_folders(self, index, name) -> list[tuple[str, str]]:
+        return [(f"extras/{self.case(index, name)}", EXTRAS_JSON)]
+
+    def scan_metadata(self, root, index, split, name) -> dict:
+        return _read_json(Path(root) / self.sample_paths(index, split, name)[2])["scan"]
 
     def remove_unfinished(self, root, name) -> list[Path]:
         # A sample's image, labels and record are renamed into place one after another, the record
@@ -334,6 +376,17 @@ class Hdf5Layout:
 
     def sample_paths(self, index, split, name) -> list[str]:
         return [f"samples/{sample_id(index)}.h5"]
+
+    def index_names(self) -> list[str]:
+        return [MANIFEST_CSV]
+
+    def sample_folders(self, index, name) -> list[tuple[str, str]]:
+        return [(f"extras/{sample_id(index)}", EXTRAS_JSON)]
+
+    def scan_metadata(self, root, index, split, name) -> dict:
+        h5py = optional_module("h5py", "dataset", "reading HDF5 files")
+        with h5py.File(Path(root) / self.sample_paths(index, split, name)[0], "r") as f:
+            return json.loads(f.attrs["scan"])
 
     def remove_unfinished(self, root, name) -> list[Path]:
         # The file appears by one rename, whole; its extras, written first, may be left without it.

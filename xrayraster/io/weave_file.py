@@ -34,7 +34,7 @@ from ..scene.materials import Material
 from ..weave.distort import Distortion
 from ..weave.materials import FibreBundle, Tracer, YarnMaterials
 from ..weave.sample import Sample
-from ..weave.size import weave_estimate
+from ..weave.size import Size, weave_estimate
 from ..weave.spec import UnitCell
 from .scene_file import _library, _materials, read_toml
 
@@ -74,17 +74,21 @@ def load_weave_file(source) -> WeaveFile:
         raise ConfigError(f"{where}: missing [weave] table (the unit cell; every key may be left at its default)")
     materials = _materials(data["materials"], f"{where} [materials]") if "materials" in data else {}
     sample, yarn_materials = weave_from_dict(data["weave"], materials, f"{where} [weave]")
-    weave_estimate(sample).check(ConfigError, f"{where} [weave.sample] ")
+    weave_estimate(sample, tables=True).check(ConfigError, f"{where} ")
     return WeaveFile(path, sample, yarn_materials)
 
 
-def weave_from_dict(d, materials: dict[str, Material], where: str = "[weave]") -> tuple[Sample, YarnMaterials]:
+def weave_from_dict(d, materials: dict[str, Material], where: str = "[weave]", *,
+                    grid_chooses_knobs: bool = False) -> tuple[Sample, YarnMaterials]:
     """A ``[weave]`` table (with its sub-tables) → the sample and its materials.
 
-    ``materials``: the file's own ``[materials]``, looked up before the library.
+    ``materials``: the file's own ``[materials]``, looked up before the library. A sample whose
+    meshes cannot fit in memory is refused before its cell is built, naming the key that makes it
+    large (:mod:`~xrayraster.weave.size`); ``grid_chooses_knobs``: the mesh knobs the table leaves
+    out are chosen later from a scan's grid (a scan file), so they are checked at their coarsest.
     """
     d = fields.table(d, "weave", where.rsplit(" ", 1)[0])
-    cell = UnitCell.from_dict({k: v for k, v in d.items() if k not in _SUBTABLES}, where)
+    cell = UnitCell.arguments_from_dict({k: v for k, v in d.items() if k not in _SUBTABLES}, where)
     sub = {name: fields.table(d.get(name, {}), f"weave.{name}", where) for name in _SUBTABLES}
     sample_where = f"{where[:-1]}.sample]"
     s = sub["sample"]
@@ -98,12 +102,25 @@ def weave_from_dict(d, materials: dict[str, Material], where: str = "[weave]") -
             kwargs[key] = fields.integer(s[key], key, sample_where, lo)
     if "samples_per_mm" in s:
         kwargs["samples_per_mm"] = fields.number(s["samples_per_mm"], "samples_per_mm", sample_where, positive=True)
+    _check_size(cell, kwargs, grid_chooses_knobs, where.removesuffix("[weave]"))
+    cell = UnitCell.from_arguments(cell, where)
     distortion = Distortion.from_dict(sub["distortion"], f"{where[:-1]}.distortion]")
     try:
         sample = Sample(cell, distortion=distortion, **kwargs)
     except WeaveError as exc:
         raise ConfigError(f"{sample_where}: {exc}") from None
     return sample, _yarn_materials(sub["materials"], materials, f"{where[:-1]}.materials]")
+
+
+def _check_size(cell: dict, sample: dict, grid_chooses_knobs: bool, file: str) -> None:
+    """Refuse (ConfigError: ``file``, then the table and the key) a sample whose meshes cannot fit,
+    from the checked keyword arguments of its cell and sample, before either is built."""
+    knobs = {}
+    if grid_chooses_knobs:  # at their coarsest: 8 points (the fewest), one sample per cell length
+        size = Size.planned(cell, sample)
+        knobs = {"points_per_section": 8, "samples_per_mm": 1.0 / (size.weft_per_layer * size.weft_spacing)}
+    size = Size.planned(cell, {**knobs, **sample})
+    weave_estimate(size, export=False, tables=True).check(ConfigError, file)
 
 
 def _yarn_materials(d: dict, materials: dict[str, Material], where: str) -> YarnMaterials:

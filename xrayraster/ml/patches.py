@@ -175,7 +175,7 @@ class PatchDataset:
         if not isinstance(self.normalize, _Intensity):
             raise ConfigError(f"normalize must be a Window, Percentiles or MaterialScale, got {normalize!r}")
         self.flips = bool(flips)
-        self.seed = int(seed)
+        self.seed = _whole("seed", seed)
         self.epoch = 0
         self._index: dict[int, _SampleIndex] = {}
 
@@ -195,7 +195,7 @@ class PatchDataset:
 
     def set_epoch(self, epoch: int) -> None:
         """Draw the patches of ``epoch`` (module docstring)."""
-        self.epoch = int(epoch)
+        self.epoch = _whole("epoch", epoch)
 
     def patch(self, item: int) -> Patch:
         """Where item ``item`` lies (indexes the sample's labels on first use, then reads one block)."""
@@ -287,7 +287,10 @@ def _crop(array, start, size, dtype) -> np.ndarray:
 
 
 def _size(patch_size) -> tuple[int, int, int]:
-    size = (patch_size,) * 3 if isinstance(patch_size, (int, np.integer)) else tuple(patch_size)
+    try:
+        size = tuple(patch_size)  # (z, y, x)
+    except TypeError:  # one number for all three
+        size = (patch_size,) * 3
     if len(size) != 3 or not all(isinstance(n, (int, np.integer)) and not isinstance(n, bool) and n > 0 for n in size):
         raise ConfigError(f"patch_size must be a positive integer or (z, y, x) of them, got {patch_size!r}")
     return tuple(int(n) for n in size)
@@ -296,6 +299,14 @@ def _size(patch_size) -> tuple[int, int, int]:
 def _positive(name: str, value) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
         raise ConfigError(f"{name} must be a positive integer, got {value!r}")
+    return int(value)
+
+
+def _whole(name: str, value) -> int:
+    """``value`` as an int >= 0 (a seed of numpy's generators: they refuse a negative one), or
+    ConfigError naming ``name``."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
+        raise ConfigError(f"{name} must be an integer >= 0, got {value!r}")
     return int(value)
 
 
@@ -309,6 +320,8 @@ def _shares(class_shares, labels: dict) -> dict:
     unknown = sorted(set(class_shares) - set(labels))
     if unknown:
         raise ConfigError(f"class_shares: label(s) {unknown} are not in the build (its labels: {labels})")
+    if any(isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) for v in class_shares.values()):
+        raise ConfigError(f"class_shares: each share a number in [0, 1], got {class_shares}")
     shares = {int(k): float(v) for k, v in class_shares.items()}
     if any(not 0.0 <= v <= 1.0 for v in shares.values()) or sum(shares.values()) > 1.0 + 1e-9:
         raise ConfigError(f"class_shares: each share in [0, 1], summing to at most 1; got {class_shares}")

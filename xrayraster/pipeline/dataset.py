@@ -16,8 +16,13 @@ times, no memory peaks): those go to the log, one line a sample.
 Workers: ``workers`` processes of a local pool (spawned, each with its own GL and OpenCL contexts
 kept across its samples, ``cores / workers`` threads each), or Dask distributed (``dask=True``: a
 ``LocalCluster`` of processes; ``scheduler``: an existing cluster's address, whose workers write
-straight into ``directory`` on a shared file system). A sample that fails is retried once, then
-written to ``failed.csv`` with its drawn values and the error.
+straight into ``directory`` on a shared file system). A sample that fails is retried once (not a
+ConfigError: bad input fails alike every time), then written to ``failed.csv`` with its drawn values
+and the error.
+
+Nothing is written until every input has passed: the dataset file (its name too), the arguments,
+the directory (an earlier build's record, the write permission), the first sample left against the
+memory and the disk, and the scheduler's answer. A refused run leaves ``directory`` as it was.
 """
 
 from __future__ import annotations
@@ -28,21 +33,26 @@ import functools
 import io
 import json
 import logging
+import numbers
 import os
 import shutil
+import signal
 import sys
 import time
+import warnings
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..core.errors import ConfigError, XrayrasterError
-from ..core.files import atomic_write_text, directory_target, remove_stale_temporaries_in
-from ..core.ownership import read_record
+from ..core.errors import ConfigError, XrayrasterError, XrayrasterWarning
+from ..core.files import (atomic_write_text, directory_target, probe_writable, remove_entry,
+                          remove_stale_temporaries_in)
+from ..core.ownership import directory_entries, read_record
 from ..core.pictures import write_gallery
 from ..core.provenance import package_version
 from ..io.dataset_layout import LAYOUTS
 from .dataset_file import DatasetFile, differences, draw, fingerprint, identity, load_dataset_file
-from .dataset_plan import sample_bytes
+from .dataset_plan import check_sample, sample_bytes
 from .distributions import Fixed
 from .scan import scan
 from .woven import weave
@@ -59,6 +69,10 @@ GALLERY_SAMPLES = 6  # the first finished samples the gallery shows
 # compute units a worker was given).
 VOLATILE = ("seconds", "peak_rss_mib", "devices")
 RETRIES = 1
+#: Seconds to reach a Dask scheduler and hear it answer, as long as Dask waits on a closed port.
+SCHEDULER_TIMEOUT_S = 30.0
+_SCHEDULER_FIX = ("start one with `dask scheduler` and give the address it prints (such as tcp://10.0.0.5:8786), "
+                  "or build on this machine with --workers N")
 
 
 @dataclass(frozen=True)
@@ -79,34 +93,46 @@ def build(config, directory, *, workers: int = 1, dask: bool = False, scheduler:
     :class:`~.dataset_file.DatasetFile`) into ``directory`` (module docstring). ``progress``: a
     bar with ETA and samples per hour on stderr. Returns a :class:`BuildReport`."""
     dataset = config if isinstance(config, DatasetFile) else load_dataset_file(config)
-    if workers < 1 or int(workers) != workers:
-        raise ConfigError(f"workers must be a whole number >= 1, got {workers!r}")
-    root = _prepare(dataset, directory, force)
+    workers = _checked_workers(workers)
+    root, replaced = _checked_directory(dataset, directory, force)
     layout = LAYOUTS[dataset.layout]
+    finished = layout.finished(root, dataset.name) if root.is_dir() and replaced is None else {}
+    todo = [i for i in range(dataset.count) if i not in finished]
+    _check_sample_folders(root, layout, todo, dataset.name)
+    _check_first_sample(dataset, root, todo)
+    if scheduler is not None:
+        check_scheduler(scheduler, SCHEDULER_TIMEOUT_S)
+    else:
+        workers = _useful_workers(workers, len(todo))
+    # Everything has passed: from here on the build writes.
+    _record(root, dataset, replaced)
+    dataset = _as_first_built(dataset, root, layout, finished)
     _sweep(root)  # what a killed build left: temporaries, and the files of samples it did not finish
     for path in layout.remove_unfinished(root, dataset.name):
         log.info("removed %s: its sample was not finished", path)
-    finished = layout.finished(root, dataset.name)
-    todo = [i for i in range(dataset.count) if i not in finished]
-    _check_disk(dataset, root, todo)
     start = time.perf_counter()
-    built, failed = [], {}
+    built, failed, interrupted = [], {}, None
     try:
         for summary in _run(dataset, root, todo, workers=workers, dask=dask, scheduler=scheduler,
                             progress=progress):
             if "error" in summary:
                 failed[summary["index"]] = summary["error"]
-                log.warning("sample %05d failed twice: %s", summary["index"], summary["error"])
+                log.warning("sample %05d failed: %s", summary["index"], summary["error"])
             else:
                 built.append(summary["index"])
                 log.info("sample %05d  seed %d  %.1f s  %s", summary["index"], summary["seed"], summary["seconds"],
                          "  ".join(f"{k} {v:.3f}" for k, v in summary["fractions"].items()))
+    except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM: the command line says what was kept
+        interrupted = exc
+        raise
     finally:
         _sweep(root)  # the pool's, when it was stopped
         records = layout.finished(root, dataset.name)
         layout.write_index(root, records, name=dataset.name, labels=_labels(records))
         _write_failed(root, dataset, failed)
         _write_gallery(root, dataset, records)
+        if interrupted is not None:
+            interrupted.add_note(_kept(root, layout, len(records), dataset.count))
     return BuildReport(root, tuple(sorted(built)), dataset.count - len(todo), failed,
                        round(time.perf_counter() - start, 3))
 
@@ -135,6 +161,27 @@ def build_sample(dataset: DatasetFile, root, index: int, threads: int | None = N
     return {"index": index, "seed": drawn.seed, "seconds": time.perf_counter() - start, "fractions": fractions}
 
 
+def _checked_workers(workers) -> int:
+    """``workers`` as an int, or ConfigError naming it."""
+    whole = isinstance(workers, numbers.Integral) or (isinstance(workers, float) and workers.is_integer())
+    if isinstance(workers, bool) or not whole or workers < 1:
+        raise ConfigError(f"workers (processes building samples at once) must be a whole number >= 1, "
+                          f"got {workers!r}")
+    return int(workers)
+
+
+def _useful_workers(workers: int, samples: int) -> int:
+    """``workers`` capped at the samples left and the cores this process may use, saying so: more
+    processes would only start and wait, or share the cores."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    useful = max(1, min(samples, cores))
+    if workers > useful and samples:
+        warnings.warn(f"workers = {workers}: using {useful} ({samples} samples left, {cores} cores); more "
+                      "processes would only wait or share the cores", XrayrasterWarning, stacklevel=3)
+        return useful
+    return workers
+
+
 def _steady(metadata: dict) -> dict:
     """A scan's metadata without what differs between two runs of it (:data:`VOLATILE`)."""
     return {k: v for k, v in metadata.items() if k not in VOLATILE}
@@ -151,54 +198,137 @@ def _sweep(root: Path) -> None:
         remove_stale_temporaries_in(folder)
 
 
-def _prepare(dataset: DatasetFile, directory, force: bool) -> Path:
-    """The dataset directory, checked and recorded before any work (module docstring)."""
+def _checked_directory(dataset: DatasetFile, directory, force: bool) -> tuple[Path, dict | None]:
+    """The dataset directory (links resolved) and, when this run replaces the earlier build there
+    (``force``, and a changed dataset file), that build's record; refused otherwise as the module
+    docstring says. Nothing is written."""
     path = Path(directory)
     root = directory_target(path, GENERATOR)
-    if root.is_dir() and any(root.iterdir()):
-        earlier = read_record(root / RECORD_NAME, GENERATOR)
-        if earlier is None:
-            raise ConfigError(f"{path} holds files that {GENERATOR} did not write (no {RECORD_NAME}); they are never "
-                              "removed: choose another directory")
-        changed = differences(earlier["identity"], dataset) if earlier["fingerprint"] != fingerprint(dataset) else []
-        if earlier["count"] > dataset.count:
-            changed.append(f"count: {earlier['count']} -> {dataset.count} (a build only grows)")
-        if changed and not force:
-            raise ConfigError(f"{path} holds a build of another dataset file ({'; '.join(changed)}); rerun with the "
-                              "same file (count may grow), choose another directory, or pass --force to remove this "
-                              "build's samples and start again")
-        if changed:
-            _remove_samples(root, earlier["identity"])
+    if not (root.is_dir() and any(root.iterdir())):
+        _check_writable(root, path)
+        return root, None
+    earlier = read_record(root / RECORD_NAME, GENERATOR)
+    if earlier is None:
+        raise ConfigError(f"{path} holds files that {GENERATOR} did not write (no {RECORD_NAME}); they are never "
+                          "removed: choose another directory")
+    changed = differences(earlier["identity"], dataset) if earlier["fingerprint"] != fingerprint(dataset) else []
+    if earlier["count"] > dataset.count:
+        changed.append(f"count: {earlier['count']} -> {dataset.count} (a build only grows)")
+    if changed and not force:
+        raise ConfigError(f"{path} holds a build of another dataset file ({'; '.join(changed)}); rerun with the "
+                          "same file (count may grow), choose another directory, or pass --force to remove this "
+                          "build's samples and start again")
+    _check_writable(root, path)
+    return root, earlier if changed else None
+
+
+def _check_writable(root: Path, path: Path) -> None:
+    """Refuse (ConfigError naming ``path``) an existing build directory, or a folder in it the build
+    writes into (samples/, imagesTr/, ...), that cannot be written: immutable, read-only, another
+    user's. Found now, not sample by sample."""
+    if root.is_dir():
+        for folder in _folders(root):
+            probe_writable(folder, path)
+
+
+def _record(root: Path, dataset: DatasetFile, replaced: dict | None) -> None:
+    """Remove the build ``replaced`` names, if any (its index first, so that no manifest lists a
+    sample that is gone), then record this one's dataset file in ``build.json``."""
+    if replaced is not None:
+        earlier = LAYOUTS[replaced["identity"]["layout"]]
+        for name in [*earlier.index_names(), GALLERY_NAME, FAILED_NAME]:
+            (root / name).unlink(missing_ok=True)
+        _remove_samples(root, replaced["identity"])
     root.mkdir(parents=True, exist_ok=True)
     record = {"generator": GENERATOR, "version": package_version(), "fingerprint": fingerprint(dataset),
               "count": dataset.count, "identity": identity(dataset)}
     atomic_write_text(root / RECORD_NAME, json.dumps(record, indent=2, sort_keys=True) + "\n")
-    return root
+
+
+def _folders(root: Path) -> list[Path]:
+    """``root`` and its visible folders: where a layout writes its samples, never deeper."""
+    return [root, *(p for p in root.iterdir() if p.is_dir() and not p.name.startswith("."))]
+
+
+def _as_first_built(dataset: DatasetFile, root: Path, layout, finished: dict) -> DatasetFile:
+    """``dataset`` naming the file the build's finished samples were drawn from, where it was: a
+    sample's metadata names its dataset file (``scan_file``), so a build resumed from an identical
+    copy elsewhere (the same fingerprint) still gives the bytes of an uninterrupted build."""
+    if not finished:
+        return dataset
+    index = min(finished)
+    try:
+        recorded = layout.scan_metadata(root, index, finished[index]["split"], dataset.name)["scan_file"]
+    except (OSError, KeyError, ValueError):  # a sample of an older build: keep this file's name
+        return dataset
+    where, _, number = str(recorded).rpartition(" sample ")
+    if number != str(index) or where in ("", dataset.where):
+        return dataset
+    return dataclasses.replace(dataset, path=None if where == "dataset table" else Path(where))
 
 
 def _remove_samples(root: Path, earlier: dict) -> None:
     """Remove the samples of an earlier build (``earlier``: its identity): the files its layout
-    names and the folders they leave empty, nothing else."""
+    names, those its samples' folders record (kept projections, meshes) and the folders they leave
+    empty, nothing else (a person's files stay)."""
     layout = LAYOUTS[earlier["layout"]]
+    folders = set()
     for index, record in layout.finished(root, earlier["name"]).items():
-        paths = [root / relative for relative in layout.sample_paths(index, record["split"], earlier["name"])]
-        for path in paths:
-            path.unlink(missing_ok=True)
-        for folder in {path.parent for path in paths} - {root}:
-            if not any(folder.iterdir()):
-                folder.rmdir()
+        for folder, marker in layout.sample_folders(index, earlier["name"]):
+            if (root / folder).is_dir():
+                for entry in directory_entries(root / folder, marker, GENERATOR)[0]:  # the recorded ones
+                    remove_entry(root / folder / entry)
+            folders.add(root / folder)
+        for relative in layout.sample_paths(index, record["split"], earlier["name"]):
+            remove_entry(root / relative)
+            folders.update((root / relative).parents)
+    for folder in sorted(folders - set(root.parents) - {root}, key=lambda f: -len(f.parts)):  # deepest first
+        if folder.is_dir() and not any(folder.iterdir()):
+            folder.rmdir()
 
 
-def _check_disk(dataset: DatasetFile, root: Path, todo: list[int]) -> None:
-    """Refuse, before the first sample, a build whose remaining samples cannot fit on the disk (the
-    first one's size, :func:`~.dataset_plan.sample_bytes`, times their number)."""
+def _check_sample_folders(root: Path, layout, todo: list[int], name: str) -> None:
+    """Refuse a folder a sample left writes whole (``samples/00003``) that holds files the build did
+    not write: they would fail that sample, and are never removed."""
+    for index in todo:
+        for folder, marker in layout.sample_folders(index, name):
+            if (root / folder).is_dir():
+                foreign = directory_entries(root / folder, marker, GENERATOR)[1]
+                if foreign:
+                    shown = ", ".join(foreign[:3]) + (f" and {len(foreign) - 3} more" if len(foreign) > 3 else "")
+                    raise ConfigError(f"{root / folder} holds {shown}, which {GENERATOR} did not write, where sample "
+                                      f"{index} goes; they are never removed: move them out of that folder, or "
+                                      "choose another directory")
+
+
+def _check_first_sample(dataset: DatasetFile, root: Path, todo: list[int]) -> None:
+    """Refuse, before any work, what the samples left would fail on, from the first one: a scan that
+    cannot fit in memory (:func:`~.dataset_plan.check_sample`, as ``xr.scan`` would refuse it), and
+    samples that cannot fit on the disk (its size, :func:`~.dataset_plan.sample_bytes`, times their
+    number)."""
     if not todo:
         return
-    needed = sample_bytes(draw(dataset, todo[0]).scan, dataset.keep) * len(todo)
-    free = shutil.disk_usage(root).free
+    first = draw(dataset, todo[0]).scan
+    check_sample(first)
+    needed = sample_bytes(first, dataset.keep) * len(todo)
+    free = shutil.disk_usage(_existing(root)).free
     if needed > free:
         raise ConfigError(f"{root}: {len(todo)} samples need about {needed / 2**30:.1f} GiB and the disk has "
                           f"{free / 2**30:.1f} GiB free; free space, choose another disk, or lower [dataset] count")
+
+
+def _existing(path: Path) -> Path:
+    """``path`` or its nearest existing parent (a build's directory is made only once all has passed)."""
+    while not path.exists() and path != path.parent:
+        path = path.parent
+    return path
+
+
+def _kept(root: Path, layout, finished: int, count: int) -> str:
+    """What an interrupted build kept, for the command line's last line."""
+    index = " and ".join(name for name in (*layout.index_names(), GALLERY_NAME) if (root / name).exists())
+    return (f"{root} keeps the {finished} finished samples of {count}" + (f", listed in {index}" if index else "")
+            + "; rerun the same command to build the rest (temporaries of unfinished samples removed)")
 
 
 def _labels(records: dict[int, dict]) -> dict[int, str]:
@@ -271,13 +401,16 @@ def _run(dataset, root, todo, *, workers, dask, scheduler, progress):
 
 
 def _attempt(dataset, root, index, threads, contexts=None) -> dict:
-    """Sample ``index``, retried once; an error after that is returned, not raised."""
+    """Sample ``index``, retried once unless bad input (a ConfigError fails alike every time); an
+    error after that is returned, not raised."""
     for attempt in range(RETRIES + 1):
         try:
             return build_sample(dataset, root, index, threads, contexts)
         except (XrayrasterError, OSError, RuntimeError, ValueError) as exc:
             error = f"{type(exc).__name__}: {' '.join(str(exc).split())}"
             log.info("sample %05d, attempt %d: %s", index, attempt + 1, error)
+            if isinstance(exc, ConfigError):
+                break
     return {"index": index, "error": error}
 
 
@@ -297,7 +430,8 @@ def _on_pool(dataset, root, todo, workers):
 
     threads = max(1, (os.cpu_count() or 1) // workers)
     context = multiprocessing.get_context("spawn")  # GL and OpenCL state does not survive a fork
-    pool = context.Pool(workers, initializer=_init_worker)
+    with _sigint_blocked():
+        pool = context.Pool(workers, initializer=_init_worker)
     try:
         yield from pool.imap_unordered(functools.partial(_attempt, dataset, root, threads=threads), todo)
     except BaseException:  # Ctrl-C, an error, or the caller stopped: the workers stop now
@@ -309,16 +443,94 @@ def _on_pool(dataset, root, todo, workers):
         pool.join()
 
 
-def _on_dask(dataset, root, todo, workers, scheduler):
+@contextmanager
+def _sigint_blocked():
+    """Block SIGINT in this thread while processes are started: they inherit the mask, so a Ctrl-C
+    at the terminal (which signals every process of the group) never reaches a pool worker, even
+    while it imports, before its initializer (the parent stops the pool: terminate); the parent's
+    own, if one came meanwhile, arrives when the block ends."""
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    from multiprocessing import resource_tracker
+
+    # Started first: starting it unblocks SIGINT in the caller (CPython's bpo-33613), and a pool
+    # starts it with its first lock.
+    resource_tracker.ensure_running()
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
-        from distributed import Client, LocalCluster, as_completed
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
+def _distributed():
+    """The ``distributed`` package, or ConfigError saying how to install it."""
+    try:
+        import distributed
     except ImportError:
         raise ConfigError("building on Dask needs the dask extra: pip install \"xrayraster[dask]\"") from None
+    return distributed
+
+
+def check_scheduler(address, timeout: float = SCHEDULER_TIMEOUT_S) -> None:
+    """Refuse, within about ``timeout`` seconds, an ``address`` where no Dask scheduler answers:
+    not an address, nothing listening, a server that says nothing (Dask would wait for ever) or
+    speaks another protocol (SSH, HTTP), a Dask worker. ConfigError, one line naming the address."""
+    _distributed()
+    import asyncio
+    from concurrent.futures import ThreadPoolExecutor
+
+    from distributed.comm import connect
+    from distributed.comm.addressing import parse_address, parse_host_port
+    from distributed.security import Security
+
+    where = f"--scheduler {address!r}"
+    try:
+        if not isinstance(address, str):
+            raise ValueError(f"an address is a string, got {type(address).__name__}")
+        scheme, location = parse_address(address)
+        if scheme in ("tcp", "tls"):
+            parse_host_port(location)
+    except ValueError as exc:
+        raise ConfigError(f"{where} is not a Dask scheduler's address ({exc}); {_SCHEDULER_FIX}") from None
+
+    async def identity():
+        comm = await connect(address, timeout=timeout, **Security().get_connection_args("client"))
+        try:
+            await comm.write({"op": "identity", "reply": True})
+            return await comm.read()
+        finally:
+            comm.abort()
+
+    def ask():  # bounded as a whole: Dask's own timeout covers connecting, not a server that never answers
+        return asyncio.run(asyncio.wait_for(identity(), timeout))
+
+    try:
+        with ThreadPoolExecutor(1) as thread:  # its own event loop, whatever loop the caller runs (Jupyter)
+            reply = thread.submit(ask).result()
+    except TimeoutError:
+        raise ConfigError(f"{where}: no Dask scheduler answered within {timeout:g} s; {_SCHEDULER_FIX}") from None
+    except OSError as exc:  # nothing listening, the connection closed
+        raise ConfigError(f"{where}: no Dask scheduler there ({' '.join(str(exc).split())}); "
+                          f"{_SCHEDULER_FIX}") from None
+    except Exception:  # what another protocol's bytes make of Dask's framing: absurd sizes, bad msgpack
+        raise ConfigError(f"{where}: the server there does not speak Dask's protocol (an SSH or web server?); "
+                          f"{_SCHEDULER_FIX}") from None
+    kind = reply.get("type") if isinstance(reply, dict) else None
+    if kind != "Scheduler":
+        raise ConfigError(f"{where}: the server there is {'a Dask ' + str(kind) if kind else 'not Dask'}, not a "
+                          f"scheduler; {_SCHEDULER_FIX}")
+
+
+def _on_dask(dataset, root, todo, workers, scheduler):
+    _distributed()
+    from distributed import Client, LocalCluster, as_completed
     # A LocalCluster's workers share this machine; a cluster's own workers know their machines, and
     # their threads are set where they are started (docs/dataset.md).
     threads = None if scheduler else max(1, (os.cpu_count() or 1) // workers)
     cluster = None if scheduler else LocalCluster(n_workers=workers, threads_per_worker=1, processes=True)
-    client = Client(scheduler or cluster)
+    client = Client(scheduler or cluster, timeout=SCHEDULER_TIMEOUT_S)
     try:
         futures = [client.submit(_attempt, dataset, str(root), index, threads, key=f"xrayraster-sample-{index}",
                                  pure=False) for index in todo]
@@ -337,10 +549,16 @@ _contexts = None
 
 
 def _init_worker() -> None:
-    """A pool worker: Ctrl-C is the parent's to handle (it stops the pool)."""
-    import signal
+    """A pool worker: Ctrl-C is the parent's to handle (it stops the pool). tqdm's bars (a woven
+    sample's, even disabled) share a lock, by default a multiprocessing one: in a spawned process a
+    named semaphore, which the pool's terminate (Ctrl-C) leaves behind, and the resource tracker then
+    warns of "leaked semaphore objects". A worker's bars are its own: a thread lock does."""
+    import threading
+
+    from tqdm import tqdm
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    tqdm.set_lock(threading.RLock())
 
 
 def _worker_contexts(threads: int | None):

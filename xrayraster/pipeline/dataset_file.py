@@ -29,12 +29,14 @@ from ..core import fields
 from ..core.choices import DATASET_KEEP, DATASET_LAYOUTS, DATASET_SPLITS
 from ..core.errors import ConfigError, GeometryError, WeaveError
 from ..core.validate import show
+from ..io.dataset_layout import NAME_RULE, check_name
 from ..io.scene_file import read_toml
-from .distributions import Distribution, Fixed, distribution_from, is_distribution
+from .distributions import KINDS, Distribution, Fixed, distribution_from, is_distribution
 from .scan_file import _TABLES, ScanFile, load_scan_file
-from .scan_keys import absolute_paths, check_key, set_key
+from .scan_keys import ANY, INDEX, KEYS, absolute_paths, check_key, set_key
 
-__all__ = ["DatasetFile", "Draw", "differences", "draw", "fingerprint", "identity", "load_dataset_file"]
+__all__ = ["DatasetFile", "Draw", "differences", "draw", "fingerprint", "identity", "is_dataset_table",
+           "load_dataset_file", "refuse_dataset_table"]
 
 #: Attempts at a sample before its draws are called impossible: a draw that a scan file cannot
 #: hold (yarns wider than their spacing) is redrawn from the next derived seed.
@@ -42,8 +44,9 @@ MAX_ATTEMPTS = 20
 #: Indices stay below 2**31, so the tags of the keys' streams (top bit set) never equal an attempt.
 MAX_COUNT = 2 ** 31
 _DATASET_KEYS = {"count", "seed", "layout", "splits", "name", "keep"}
+#: What only a dataset file holds: a scan (or scene) file with one of these is a dataset file.
+DATASET_ONLY = ("dataset", "vary", "base")
 _SPLIT_TOLERANCE = 1e-9
-_NAME = re.compile(r"[A-Za-z0-9_]+")
 # Seeds a sample gets from its own seed unless [vary] names them (or a table above them).
 _SEED_KEYS = ("scan.seed", "weave.sample.seed")
 
@@ -103,7 +106,7 @@ def load_dataset_file(source, *, base_dir=None) -> DatasetFile:
         path = Path(os.path.abspath(source))
         data, where, directory = read_toml(path, "dataset file"), str(path), path.parent
     fields.only(data, {"base", "dataset", "vary", *_TABLES}, where)
-    base = _base(data, directory, where)
+    base = _base(data, directory, where, path)
     settings = fields.table(fields.required(data, "dataset", where), "dataset", where)
     dataset = DatasetFile(path, base, vary=_vary(fields.table(data.get("vary", {}), "vary", where), base, where),
                           directory=directory, **_settings(settings, path, f"{where} [dataset]"))
@@ -174,8 +177,9 @@ def differences(a: DatasetFile | dict, b: DatasetFile | dict) -> list[str]:
 # ----------------------------------------------------------------------------- reading
 
 
-def _base(data: dict, directory: Path, where: str) -> dict:
-    """The base scan table: the file ``base`` names or the inline tables, its file paths made absolute."""
+def _base(data: dict, directory: Path, where: str, own: Path | None) -> dict:
+    """The base scan table: the file ``base`` names or the inline tables, its file paths made absolute.
+    ``own``: the dataset file's path (None for a table), which ``base`` may not name."""
     inline = {k: v for k, v in data.items() if k in _TABLES}
     if "base" in data:
         if inline:
@@ -183,6 +187,10 @@ def _base(data: dict, directory: Path, where: str) -> dict:
                               f"(got base and [{'], ['.join(sorted(inline))}]); remove one")
         path = directory / fields.string(data["base"], "base", where)
         table = read_toml(path, "scan file")
+        if own is not None and path.resolve() == own.resolve():
+            raise ConfigError(f"{where}: base = {show(data['base'])} names this dataset file itself; base names the "
+                              "scan file every sample starts from (docs/scan.md), or give its tables inline")
+        refuse_dataset_table(table, f"{where}: base = {show(data['base'])}", "a scan file (docs/scan.md)")
         fields.only(table, _TABLES, str(path))
         return absolute_paths(table, path.parent.absolute())
     if not inline:
@@ -191,21 +199,45 @@ def _base(data: dict, directory: Path, where: str) -> dict:
     return absolute_paths(copy.deepcopy(inline), directory)
 
 
+def is_dataset_table(data) -> bool:
+    """Whether a parsed TOML file is a dataset file (it holds [dataset], [vary] or base)."""
+    return isinstance(data, Mapping) and any(key in data for key in DATASET_ONLY)
+
+
+def refuse_dataset_table(data, where: str, expected: str) -> None:
+    """Refuse a dataset file where ``expected`` (a scan file, a scene file) is read: one line naming
+    what it is, instead of its keys as unknown ones. ``where`` names the file as the reader says it.
+    (For a loader of scan or scene files: ``xrayraster preview DATASET.toml`` meets this too.)"""
+    if is_dataset_table(data):
+        found = ", ".join(f"[{k}]" if k != "base" else "base" for k in DATASET_ONLY if k in data)
+        raise ConfigError(f"{where} is a dataset file (it has {found}: docs/dataset.md), not {expected}; give "
+                          "a scan file, or build the dataset with `xrayraster build DATASET.toml -o DIR`")
+
+
 def _settings(d: dict, path: Path | None, where: str) -> dict:
     """The ``[dataset]`` table's keys, checked, with their defaults."""
     fields.only(d, _DATASET_KEYS, where)
     layout = d.get("layout", DATASET_LAYOUTS[0])
     if layout not in DATASET_LAYOUTS:
         raise ConfigError(f"{where}: layout must be one of {', '.join(DATASET_LAYOUTS)}, got {show(layout)}")
-    default_name = re.sub(r"[^A-Za-z0-9_]", "_", path.stem) if path is not None else "dataset"
-    name = fields.string(d.get("name", default_name), "name", where)
-    if not _NAME.fullmatch(name):
-        raise ConfigError(f"{where}: name must be letters, digits and underscores (it names nnU-Net's files), "
-                          f"got {show(name)}")
     return {"count": fields.integer(fields.required(d, "count", where), "count", where, 1, MAX_COUNT),
             "seed": fields.integer(fields.required(d, "seed", where), "seed", where, 0),
-            "layout": layout, "splits": _splits(d.get("splits", {"train": 1.0}), where), "name": name,
+            "layout": layout, "splits": _splits(d.get("splits", {"train": 1.0}), where), "name": _name(d, path, where),
             "keep": _keep(d.get("keep", []), where)}
+
+
+def _name(d: dict, path: Path | None, where: str) -> str:
+    """``[dataset] name``, or by default the file's name, other characters as ``_``; refused unless
+    it is a dataset name (io.dataset_layout.check_name: the one rule of every layout)."""
+    if "name" in d:
+        return check_name(fields.string(d["name"], "name", where), where)
+    default = re.sub(r"[^A-Za-z0-9_]", "_", path.stem) if path is not None else "dataset"
+    try:
+        return check_name(default, where)
+    except ConfigError:
+        suggestion = default.strip("_") or "dataset"
+        raise ConfigError(f"{where}: the dataset's name defaults to the file's, {default!r}, which is not "
+                          f"{NAME_RULE}; set name = \"{suggestion}\" in [dataset]") from None
 
 
 def _splits(value, where: str) -> dict:
@@ -243,6 +275,10 @@ def _flatten(table: dict, prefix: str, where: str) -> dict:
     for name, value in table.items():
         key = f"{prefix}{name}"
         if isinstance(value, dict) and not is_distribution(value):
+            if _names_a_value(key):  # a table where a value goes: meant as a distribution, of no known kind
+                raise ConfigError(f"{where}: '{key}' = {show(value)}: unknown distribution "
+                                  f"{', '.join(repr(k) for k in value)}; give one of {', '.join(KINDS)} "
+                                  "(docs/dataset.md), or a value; a table as the value is { choice = [{ ... }] }")
             if not value:
                 raise ConfigError(f"{where}: '{key}' is an empty table: give a distribution such as "
                                   "{ uniform = [a, b] }, a value, or keys below it")
@@ -254,6 +290,22 @@ def _flatten(table: dict, prefix: str, where: str) -> dict:
                 raise ConfigError(f"{where}: '{k}' is given twice (as a dotted key and in a nested table); keep one")
         flat.update(entries)
     return flat
+
+
+def _names_a_value(key: str) -> bool:
+    """Whether the dotted scan-file ``key`` names a value (a leaf of scan_keys.KEYS), not a table."""
+    tree = KEYS
+    for part in key.split("."):
+        if not isinstance(tree, dict):
+            return False  # below a value, or in a table the key sets do not describe
+        if INDEX in tree:
+            tree = tree[INDEX] if part.isdigit() else _MISSING
+        else:
+            tree = tree.get(part, tree.get(ANY, _MISSING))
+    return tree is None
+
+
+_MISSING = object()
 
 
 # ----------------------------------------------------------------------------- drawing

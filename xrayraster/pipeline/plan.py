@@ -1,11 +1,12 @@
 """A scan's up-front plan: its time and memory from the scan file alone, before the sample is meshed.
 
 Memory: the parts that grow with the file's keys (:class:`~xrayraster.core.estimate.Part`): the
-views' geometry, the sample's meshes (a weave's triangles estimated from its cells and mesh knobs,
-:mod:`~xrayraster.weave.size`), one batch of projections and of filtered views, the volume and the
-labels. Time: the sample's meshing, the projections (:mod:`~xrayraster.simulate.estimate`), the
-FDK's backprojection (per voxel and view) and the labels (per voxel). The FDK's and the labels'
-rates come from the full twin on the development machine (801 views into 512³ voxels: FDK 119.5 s,
+views' geometry, the sample's meshes (a weave's triangles estimated from every key that multiplies
+them: its yarns a cell, spacings, cells and mesh knobs, :mod:`~xrayraster.weave.size`), one batch of
+projections and of filtered views, the volume and the labels. A preview's frame
+(:func:`frame_estimate`) is the same sample and one view. Time: the sample's meshing, the
+projections (:mod:`~xrayraster.simulate.estimate`), the FDK's backprojection (per voxel and view)
+and the labels (per voxel). The FDK's and the labels' rates come from the full twin on the development machine (801 views into 512³ voxels: FDK 119.5 s,
 labels 1.4 s, docs/twin.md) and are right to an order of magnitude.
 """
 
@@ -38,23 +39,10 @@ def scan_estimate(loaded: ScanFile, batch_views: int) -> Estimate:
     voxels = nz * ny * nx
     shape = f"[volume] shape = {list(volume.shape)}"
     grid_fix = "use a coarser grid (shape, voxel_size) or a part of it (offset)"
-    if loaded.weave is not None:
-        sample = loaded.weave.sample
-        triangles = estimated_triangles(sample)
-        meshes = mesh_part(sample, BYTES_PER_SCENE_TRIANGLE)
-        meshes = Part(meshes.what, meshes.bytes, f"[weave.sample] {meshes.key}", meshes.fix)
-        meshing = triangles * MESH_SECONDS_PER_TRIANGLE
-    else:
-        triangles = loaded.scene.num_triangles
-        meshes = Part(f"meshes of {triangles} triangles", triangles * BYTES_PER_SCENE_TRIANGLE, "[[objects]] mesh",
-                      "use coarser meshes")
-        meshing = 0.0
-    mounted = loaded.mount.num_triangles if loaded.mount is not None else 0
-    triangles += mounted
+    sample, triangles, meshing = _sample_plan(loaded)
     parts = (
         Part("views' geometry", views * BYTES_PER_VIEW, f"[geometry] num_views = {views}", "use fewer views"),
-        meshes,
-        Part(f"mount of {mounted} triangles", mounted * BYTES_PER_SCENE_TRIANGLE, "[[mount]] mesh", "use coarser meshes"),
+        *sample,
         Part(f"a batch of {batch_views} views", min(views, batch_views) * rows * cols * BYTES_PER_BATCH_PIXEL,
              f"[geometry] detector_shape = {[rows, cols]}", "use fewer detector pixels"),
         Part("float32 volume", voxels * 4, shape, grid_fix),
@@ -65,8 +53,45 @@ def scan_estimate(loaded: ScanFile, batch_views: int) -> Estimate:
     return Estimate(f"scan of {views} views into {nz}×{ny}×{nx} voxels", seconds, parts)
 
 
+def frame_estimate(loaded) -> Estimate:
+    """The plan of one view of a scan or scene file (``loaded``: a ScanFile or SceneFile), as the
+    preview renders it: the sample meshed (or the objects), and one view's pixels in flight."""
+    rows, cols = loaded.geometry.detector_shape
+    sample, triangles, meshing = _sample_plan(loaded)
+    view = Part(f"a view of {rows}×{cols} pixels", rows * cols * BYTES_PER_BATCH_PIXEL,
+                f"[geometry] detector_shape = {[rows, cols]}", "use fewer detector pixels")
+    return Estimate(f"frame of {rows}×{cols} pixels", meshing + seconds_per_view(rows * cols, triangles),
+                    (*sample, view))
+
+
 def check_scan(loaded: ScanFile, batch_views: int) -> Estimate:
     """:func:`scan_estimate`, refused (ConfigError naming the file, the table and the key) when it cannot fit."""
     estimate = scan_estimate(loaded, batch_views)
     estimate.check(ConfigError, f"{loaded.path} ")
     return estimate
+
+
+def check_frame(loaded) -> Estimate:
+    """:func:`frame_estimate`, refused (ConfigError naming the file, the table and the key) when it cannot fit."""
+    estimate = frame_estimate(loaded)
+    estimate.check(ConfigError, f"{loaded.path} ")
+    return estimate
+
+
+def _sample_plan(loaded) -> tuple[tuple[Part, ...], int, float]:
+    """What the sample (a weave's meshes, estimated before meshing, or the objects as loaded) and
+    the mount add to a plan: their parts, their triangles, and the seconds to mesh them."""
+    weave, mount = getattr(loaded, "weave", None), getattr(loaded, "mount", None)
+    if weave is not None:
+        triangles = estimated_triangles(weave.sample)
+        meshes = mesh_part(weave.sample, BYTES_PER_SCENE_TRIANGLE, tables=True)
+        meshing = triangles * MESH_SECONDS_PER_TRIANGLE
+    else:
+        triangles = loaded.scene.num_triangles
+        meshes = Part(f"meshes of {triangles} triangles", triangles * BYTES_PER_SCENE_TRIANGLE, "[[objects]] mesh",
+                      "use coarser meshes")
+        meshing = 0.0
+    mounted = mount.num_triangles if mount is not None else 0
+    parts = (meshes, Part(f"mount of {mounted} triangles", mounted * BYTES_PER_SCENE_TRIANGLE, "[[mount]] mesh",
+                          "use coarser meshes"))
+    return parts, triangles + mounted, meshing

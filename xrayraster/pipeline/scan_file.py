@@ -40,6 +40,7 @@ from ..physics.spectrum import Spectrum
 from ..recon.truncation import DEFAULT_WIDTH
 from ..scene.materials import Material
 from ..scene.scene import Scene
+from ..weave.size import bend_search_estimate
 from ..weave.tessellation import resolution_for
 from .pose import Pose
 
@@ -186,7 +187,8 @@ def load_scan_file(source, *, where: str = "scan table", base_dir=None) -> ScanF
         geometry = _geometry(fields.table(data["geometry"], "geometry", f"{path}"), f"{path} [geometry]")
     scene = weave = None
     if has_weave:
-        weave = WeaveFile(path, *weave_from_dict(data["weave"], materials or {}, f"{path} [weave]"))
+        weave = WeaveFile(path, *weave_from_dict(data["weave"], materials or {}, f"{path} [weave]",
+                                                 grid_chooses_knobs=True))
         lo, hi = weave.sample.box
         box = np.stack([lo, hi]) - (lo + hi) / 2
         pose = pose.about(np.zeros(3))
@@ -227,9 +229,12 @@ def mesh_resolution_for(weave: WeaveFile, volume: VolumeGeometry, tolerance_voxe
     of the choice (knobs, tolerance in mm, which were chosen) for the scan's metadata."""
     sample = weave.sample
     tolerance = tolerance_voxels * float(min(volume.voxel_size))
-    k, rate = resolution_for(sample.cell, tolerance)
-    knobs = {"points_per_section": sample.points_per_section if given["points_per_section"] else k,
-             "samples_per_mm": sample.samples_per_mm if given["samples_per_mm"] else rate}
+    knobs = {"points_per_section": sample.points_per_section, "samples_per_mm": sample.samples_per_mm}
+    if not all(given.values()):  # the search for the tightest bend grows with the binders' columns: planned first
+        bend_search_estimate(sample).check(ConfigError, f"{weave.path} ")
+        k, rate = resolution_for(sample.cell, tolerance)
+        knobs = {"points_per_section": knobs["points_per_section"] if given["points_per_section"] else k,
+                 "samples_per_mm": knobs["samples_per_mm"] if given["samples_per_mm"] else rate}
     record = {**knobs, "tolerance_mm": tolerance, "tolerance_voxels": tolerance_voxels,
               "chosen_from_the_grid": sorted(name for name, fixed in given.items() if not fixed)}
     return dataclasses.replace(weave, sample=dataclasses.replace(sample, **knobs)), record

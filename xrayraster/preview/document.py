@@ -14,16 +14,20 @@ from __future__ import annotations
 import copy
 import dataclasses
 import json
-import math
 from dataclasses import dataclass
 from pathlib import Path
 
+import tomli_w
+
+from ..core import fields
 from ..core.choices import RADIOGRAPH_OUTPUTS
 from ..core.errors import ConfigError
+from ..core.validate import show
 from ..io.scene_file import load_scene_file, read_toml
 from ..io.weave_file import DEFAULT_SOURCE
+from ..pipeline.dataset_file import refuse_dataset_table
 from ..pipeline.scan_file import load_scan_file
-from ..pipeline.scan_keys import absolute_paths, check_key, set_key
+from ..pipeline.scan_keys import INDEX, PATH_KEYS, absolute_paths, check_key, set_key
 
 #: Tables only a scan file has: a file with none of them is a scene file (``xrayraster render``'s).
 SCAN_TABLES = {"weave", "volume", "scan", "pose", "mount"}
@@ -31,6 +35,12 @@ SCAN_TABLES = {"weave", "volume", "scan", "pose", "mount"}
 SCANNER_TABLES = ("geometry", "source", "detector")
 #: What a frame shows: a radiograph quantity, or the path length (mm) through one material.
 OUTPUTS = (*RADIOGRAPH_OUTPUTS, "path_length")
+#: The range of a TOML integer (64 bits; JSON has no limit), and more levels than any value an edit
+#: may give nests (the whole [materials] table: a material's mass fractions are three levels down).
+TOML_INTEGERS = (-2**63, 2**63 - 1)
+MAX_NESTING = 8
+#: The keys that name files (mesh and spectrum files), as a message shows them.
+FILE_KEYS = ", ".join(".".join("N" if part == INDEX else part for part in key) for key in PATH_KEYS)
 
 
 @dataclass(frozen=True)
@@ -47,21 +57,23 @@ class View:
 
     @classmethod
     def from_dict(cls, d: dict) -> "View":
-        """The view a page asks for; ConfigError naming the field when a value is unusable."""
+        """The view a page asks for; ConfigError naming the field when a value is unusable or not of
+        its JSON type (``"noise": "yes"`` is no boolean)."""
         unknown = sorted(set(d) - {f.name for f in dataclasses.fields(cls)})
         if unknown:
             raise ConfigError(f"view: unknown field(s) {', '.join(unknown)}")
         angle = d.get("angle_deg")
-        if angle is not None and (not isinstance(angle, (int, float)) or not math.isfinite(angle)):
-            raise ConfigError(f"view: angle_deg must be a number of degrees, got {angle!r}")
+        if angle is not None:
+            angle = fields.number(angle, "angle_deg", "view")
         output = d.get("output", "lineint")
-        if output not in OUTPUTS:
-            raise ConfigError(f"view: output must be one of {', '.join(OUTPUTS)}, got {output!r}")
-        material, seed = d.get("material", 0), d.get("seed", 0)
-        for name, value in (("material", material), ("seed", seed)):
-            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-                raise ConfigError(f"view: {name} must be an integer >= 0, got {value!r}")
-        return cls(None if angle is None else float(angle), output, material, bool(d.get("noise", False)), seed)
+        if not isinstance(output, str) or output not in OUTPUTS:
+            raise ConfigError(f"view: output must be one of {', '.join(OUTPUTS)}, got {show(output)}")
+        noise = d.get("noise", False)
+        if not isinstance(noise, bool):
+            raise ConfigError(f"view: noise must be true or false, got {show(noise)}")
+        material = fields.integer(d.get("material", 0), "material", "view", 0)
+        seed = fields.integer(d.get("seed", 0), "seed", "view", 0)
+        return cls(angle, output, material, noise, seed)
 
 
 @dataclass(frozen=True, eq=False)
@@ -77,6 +89,7 @@ class Document:
     def open(cls, path) -> "Document":
         path = Path(path)
         data = read_toml(path, "preview file")
+        refuse_dataset_table(data, str(path), "a scene, scan or weave file")
         if "weave" in data and set(data) <= {"weave", "materials"}:
             # A weave file is a scan file without a tube: the scan of `xrayraster weave`'s scene file
             # (its framing geometry is a scan file's default for a weave), which saving makes a scan file.
@@ -105,10 +118,17 @@ class Document:
 
     def edited(self, edits: dict) -> "Document":
         """This document with ``edits`` ({dotted key: value}, a value of None removing the key)
-        applied; the keys are checked here, the values by :meth:`load`."""
+        applied; the keys are checked here, the values by :meth:`load`. An edit changes values, never
+        which files are read: a key that names a file, or a table or array that holds one, is refused
+        (the page serves one file and what it names, whatever a request asks)."""
         table = copy.deepcopy(self.table)
         for key, value in edits.items():
+            if names_files(key):
+                raise ConfigError(f"{self.path}: '{key}' cannot be edited in a preview: which files are read "
+                                  f"({FILE_KEYS}, and the tables and arrays that hold them) is fixed when the file "
+                                  f"opens; change it in {self.path.name} itself and open that again")
             check_key(key, table, f"{self.path}")
+            toml_value(value, key, f"{self.path}")
             if value is None:
                 *parents, last = key.split(".")
                 holder = table
@@ -143,6 +163,16 @@ class Document:
             table.setdefault("scan", {}).update(noise=view.noise, seed=view.seed)
         return table
 
+    def settings(self, view: View, name: str, loaded=None) -> str:
+        """The text of the file saved as ``name`` for ``view`` (:meth:`saved`, headed by the command
+        that renders it), read by the file's loader first, as a frame is: a file that command would
+        refuse is never saved (ConfigError naming the key). ``loaded``: this document as :meth:`load`
+        reads it (a scene file's meshes are not read again)."""
+        table = self.saved(view)
+        Document(self.path, self.kind, table).load(objects_of=loaded)
+        return (f"# Saved by xrayraster preview; view 0 is the view on screen:\n# {self.command(name, view)}\n"
+                + tomli_w.dumps(table))
+
     def command(self, name: str, view: View) -> str:
         """The command line that renders view 0 of the file saved as ``name`` as the preview shows it."""
         if self.kind == "scan":
@@ -151,3 +181,33 @@ class Document:
             return f"xrayraster render {name} -o view.tif --path-lengths"
         noise = f" --noise --seed {view.seed}" if view.noise else ""
         return f"xrayraster render {name} -o view.tif --output {view.output}{noise}"
+
+
+def names_files(key: str) -> bool:
+    """Whether the dotted ``key`` is a file key (:data:`PATH_KEYS`) or a table or array above one:
+    ``objects.0.mesh``, ``objects.0``, ``objects``, ``source``. A key below a mesh (a primitive's
+    ``objects.1.mesh.sphere``) is not: a table stays a table. Any part stands for an array's index,
+    as ``check_key`` reads ``00`` or other digits as one."""
+    parts = key.split(".")
+    return any(len(parts) <= len(path) and all(want in (INDEX, part) for want, part in zip(path, parts))
+               for path in PATH_KEYS)
+
+
+def toml_value(value, key: str, where: str) -> None:
+    """Refuse an edit's value that no TOML file holds, before a loader's checks meet it: an integer
+    beyond 64 bits (they would overflow converting it), a null below the top (None at the top
+    removes the key), or arrays and tables nested beyond any file's (a hostile request's)."""
+    pending = [(value, 0)]
+    while pending:  # not recursive: a value nested a thousand deep must not exhaust the stack
+        item, depth = pending.pop()
+        if depth > MAX_NESTING:
+            raise ConfigError(f"{where}: '{key}': nested deeper than any value of the file ({MAX_NESTING} levels)")
+        if isinstance(item, dict):
+            pending.extend((v, depth + 1) for v in item.values())
+        elif isinstance(item, list):
+            pending.extend((v, depth + 1) for v in item)
+        elif item is None and depth > 0:
+            raise ConfigError(f"{where}: '{key}': null is no TOML value; give a number, string, array or table")
+        elif isinstance(item, int) and not isinstance(item, bool) and not TOML_INTEGERS[0] <= item <= TOML_INTEGERS[1]:
+            raise ConfigError(f"{where}: '{key}': an integer beyond 64 bits, which no TOML file holds; give a "
+                              "smaller one, or a float")

@@ -23,6 +23,7 @@ from ..core.errors import ConfigError
 from ..core.projections import Projections
 from ..gl.context import GLContext
 from ..physics.detector import Detector
+from ..pipeline.plan import check_frame
 from ..recon.opencl import CLContext
 from ..simulate.renderer import Renderer
 from .document import Document, View
@@ -115,7 +116,8 @@ class Previewer:
                     realism=loaded.realism, spectral_table=document.kind == "scan" and view.noise)
 
     def load(self, document: Document):
-        """The document as its loader reads it, loaded again only when its tables changed."""
+        """The document as its loader reads it, loaded again only when its tables changed; a frame
+        of it that cannot fit in memory is refused here, before any meshing (:func:`check_frame`)."""
         key, sample = json.dumps(document.table, sort_keys=True), document.sample_key()
         if self._loaded[0] != key:
             # Only the scanner changed: a scene file's meshes are not read again.
@@ -123,6 +125,7 @@ class Previewer:
             if document.kind == "scene" and loaded.spectrum is None:
                 raise ConfigError(f"{document.path}: a preview shows radiographs, so the file needs a [source] table "
                                   "(the X-ray spectrum) and [materials] (docs/scene-format.md)")
+            check_frame(loaded)
             self._loaded = (key, sample, loaded)
         return self._loaded[2]
 

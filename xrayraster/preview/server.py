@@ -14,11 +14,14 @@ over a WebSocket.
 * ``POST /slice`` (scan files): the state in the body; the answer, the middle slice of the grid
   from a cut-down scan with its labels (:mod:`.quick_slice`, :func:`.encoding.encode_slice`).
 
-Frames render one at a time on one thread that owns the GL context (:class:`~.frames.Previewer`);
-an error in a request (a bad value, a weave whose yarns do not fit) is answered, never raised, so
-no request stops the server. Requests from another origin are refused, and so are requests that
-name another host (DNS rebinding); a server bound beyond loopback needs ``?token=`` on every
-request, which the printed address carries.
+Frames render one at a time on one thread that owns the GL context (:class:`~.frames.Previewer`,
+:class:`RenderThread`); an error in a request (a bad value, a weave whose yarns do not fit) is
+answered, never raised, so no request stops the server. The event loop never waits on that thread:
+a request is answered with an error past its deadline (:data:`FRAME_DEADLINE_S`), a new page gets
+the hello made once at the start, and Ctrl-C or SIGTERM stop the server whatever a frame is doing.
+Requests from another origin are refused, and so are requests that name another host (DNS
+rebinding); a server bound beyond loopback needs ``?token=`` on every request, which the printed
+address carries.
 """
 
 from __future__ import annotations
@@ -27,18 +30,19 @@ import asyncio
 import hmac
 import json
 import logging
+import queue
 import secrets
+import socket
 import tempfile
 import threading
 import time
 import warnings
 import webbrowser
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future
 from importlib import resources
 from pathlib import Path
 from urllib.parse import urlsplit
 
-import tomli_w
 import uvicorn
 from starlette.applications import Starlette
 from starlette.requests import Request
@@ -53,6 +57,7 @@ from .controls import controls
 from .document import OUTPUTS, Document, View
 from .encoding import encode, encode_slice
 from .frames import Previewer, first_angle_deg, material_names
+from .listen import check_listen
 
 log = logging.getLogger("xrayraster")
 
@@ -60,17 +65,122 @@ LOOPBACK = ("127.0.0.1", "localhost", "::1")
 SAVES = ("settings.toml", "view.tif", "view.png")
 
 
-class Preview:
-    """One document served: the previewer and the single thread that renders its frames."""
+#: A request (a frame, a save, a quick slice) not answered within this many seconds is answered with
+#: an error instead; its work goes on in the background (a thread cannot be stopped), and until it
+#: ends, further requests are answered "busy" at once. The small twin's frame takes ~0.2 s, its
+#: quick slice ~2 s, meshing a 6 × 6-cell weave ~10 s on the development machine.
+FRAME_DEADLINE_S = 30.0
+#: How often a request waiting on the render thread looks whether the server is shutting down.
+CLOSING_CHECK_S = 0.1
+#: How long closing waits for an idle render thread to release the GL context.
+CLOSE_WAIT_S = 2.0
 
-    def __init__(self, document: Document, threads: int | None = None):
-        self.document = document
-        self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="xrayraster-preview")
+
+class RenderThread:
+    """The one thread that renders (a GL context is current in one thread): jobs run in order, each
+    answered through a :class:`concurrent.futures.Future`. A daemon thread, so that a job stuck for
+    minutes (a huge mesh) never holds the process: Python cannot stop a thread, so shutting down
+    leaves it behind instead of joining it (a ThreadPoolExecutor's threads are joined at exit)."""
+
+    def __init__(self, name: str):
+        self._jobs: queue.SimpleQueue = queue.SimpleQueue()
+        self._started: float | None = None  # when the running job started; None while idle
+        self._thread = threading.Thread(target=self._serve, name=name, daemon=True)
+        self._thread.start()
+
+    def submit(self, work, *args) -> Future:
+        """``work(*args)`` after the jobs before it; its future (cancelled before it starts, it never runs)."""
+        future = Future()
+        self._jobs.put((future, work, args))
+        return future
+
+    def running_for(self) -> float | None:
+        """Seconds the job now running has run; None while idle."""
+        started = self._started
+        return None if started is None else time.monotonic() - started
+
+    @property
+    def alive(self) -> bool:
+        return self._thread.is_alive()
+
+    def stop(self) -> None:
+        """End the thread once the jobs submitted so far are done (never waited for). A job still
+        running is abandoned: the thread is marked so (``abandoned``), and the command line ends its
+        process without tearing the interpreter down under it (xrayraster/cli/__init__.py, ``run``)."""
+        self._thread.abandoned = self.running_for() is not None
+        self._jobs.put(None)
+
+    def _serve(self) -> None:
+        while (job := self._jobs.get()) is not None:
+            future, work, args = job
+            if not future.set_running_or_notify_cancel():
+                continue  # cancelled while it waited
+            self._started = time.monotonic()
+            try:
+                result = work(*args)
+            except BaseException as exc:  # noqa: BLE001 - answered to whoever waits; the thread goes on
+                future.set_exception(exc)
+            else:
+                future.set_result(result)
+            finally:
+                self._started = None
+
+
+class Preview:
+    """One document served: the previewer and the single thread that renders its frames
+    (:class:`RenderThread`). A request waits at most ``deadline_s`` for its answer (:meth:`run`), and
+    no longer than the server runs: nothing the render thread does can hold the server."""
+
+    def __init__(self, document: Document, threads: int | None = None, deadline_s: float = FRAME_DEADLINE_S):
+        self.document, self.deadline_s = document, deadline_s
         self._previewer = Previewer(threads)
+        self._render = RenderThread("xrayraster-preview")
+        self._closing = False
+        # The first message depends on the document alone: made once, first, so that a new page
+        # gets it at once even while another page's frame renders.
+        self._hello = self._render.submit(self.hello, self._previewer)
+
+    async def greeting(self) -> dict:
+        """The first message to a page (:meth:`hello`): the one made at the start, made again only
+        if that failed (the failure may have passed)."""
+        if self._hello.cancelled() or (self._hello.done() and self._hello.exception() is not None):
+            self._hello = self._render.submit(self.hello, self._previewer)
+        return await self._awaited(self._hello)
 
     async def run(self, work, *args):
-        """``work(previewer, *args)`` on the render thread."""
-        return await asyncio.get_running_loop().run_in_executor(self._executor, work, self._previewer, *args)
+        """``work(previewer, *args)`` on the render thread. An XrayrasterError instead when the
+        answer takes over :attr:`deadline_s` (the work goes on, its answer dropped), while an earlier
+        job that took that long still runs ("busy", at once), or when the server shuts down
+        (:meth:`abandon`)."""
+        running = self._render.running_for()
+        if running is not None and running > self.deadline_s:
+            raise XrayrasterError(f"busy: a frame has been rendering for {running:.0f} s, longer than its "
+                                  f"{self.deadline_s:g} s deadline; the preview answers again when it has finished")
+        return await self._awaited(self._render.submit(work, self._previewer, *args))
+
+    async def _awaited(self, job: Future):
+        """``job``'s result, awaited without blocking the event loop, within the deadline and while
+        the server runs (looked at every :data:`CLOSING_CHECK_S`)."""
+        answer = asyncio.wrap_future(job)
+        deadline = time.monotonic() + self.deadline_s
+        try:
+            while not answer.done():
+                if self._closing:
+                    raise XrayrasterError("the preview server is shutting down")
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise XrayrasterError(f"frame took longer than {self.deadline_s:g} s, its deadline: it goes on in "
+                                          "the background and the preview answers again when it has finished; a "
+                                          "smaller sample or detector renders faster")
+                await asyncio.wait({answer}, timeout=min(left, CLOSING_CHECK_S))
+            return answer.result()
+        finally:
+            if not answer.done():
+                answer.cancel()  # a job still queued never runs; a running one's answer is dropped
+
+    def abandon(self) -> None:
+        """The server is shutting down: every request waiting on the render thread ends now."""
+        self._closing = True
 
     def state(self, message: dict) -> tuple[Document, View]:
         """The document and view a request describes (XrayrasterError naming the field if it cannot)."""
@@ -89,11 +199,18 @@ class Preview:
                          "angle_deg": first_angle_deg(loaded.geometry)}}
 
     def close(self) -> None:
-        try:
-            self._executor.submit(self._previewer.release).result()
-        except RuntimeError:  # the interpreter is exiting (a notebook's server): its contexts go with it
-            return
-        self._executor.shutdown()
+        """Stop waiting on the render thread and end it once it has released the GL context: at once
+        when it is idle; after the job it runs otherwise, which is never waited for (the process
+        may end first, and the contexts with it)."""
+        self.abandon()
+        running = self._render.running_for() is not None
+        release = self._render.submit(self._previewer.release)
+        if not running:
+            try:
+                release.result(timeout=CLOSE_WAIT_S)
+            except TimeoutError:  # a job came first and runs on: the release follows it
+                pass
+        self._render.stop()
 
 
 def make_app(preview: Preview, *, host: str = "127.0.0.1", port: int = 8000, token: str | None = None) -> Starlette:
@@ -102,9 +219,11 @@ def make_app(preview: Preview, *, host: str = "127.0.0.1", port: int = 8000, tok
     hosts = {f"{h}:{port}" for h in (*LOOPBACK, "[::1]", host)}
 
     def refused(connection) -> str | None:
-        """Why a request (or WebSocket) is refused: None when it is not."""
+        """Why a request (or WebSocket) is refused: None when it is not. On loopback (no token) a
+        request must name this server (no DNS rebinding); bound beyond it, the token admits a
+        request whatever name of the machine it uses (a browser elsewhere knows it by its own)."""
         headers, query = connection.headers, connection.query_params
-        if headers.get("host") not in hosts:
+        if token is None and headers.get("host") not in hosts:
             return "unknown host"
         origin = headers.get("origin")
         if origin is not None and urlsplit(origin).netloc != headers.get("host"):
@@ -126,14 +245,16 @@ def make_app(preview: Preview, *, host: str = "127.0.0.1", port: int = 8000, tok
             await ws.close(code=1008, reason=why)
             return
         await ws.accept()
-        await ws.send_json(await preview.run(preview.hello))
+        await ws.send_json(await preview.greeting())
         newest: list = []  # the one request waiting (a newer one replaces it)
         arrived = asyncio.Event()
 
         async def listen():
             while True:
-                text = await ws.receive_text()
-                newest[:] = [text]
+                message = await ws.receive()
+                if message["type"] == "websocket.disconnect":
+                    raise WebSocketDisconnect(message.get("code", 1000))
+                newest[:] = [message.get("text")]  # None for a binary message: answered with an error
                 arrived.set()
 
         listener = asyncio.create_task(listen())
@@ -159,11 +280,10 @@ def make_app(preview: Preview, *, host: str = "127.0.0.1", port: int = 8000, tok
         if what not in SAVES:
             return PlainTextResponse(f"no such file: {what} (one of {', '.join(SAVES)})", status_code=404)
         try:
-            document, view = preview.state(await request.json())
+            document, view = preview.state(_request(await request.body()))
             if what == "settings.toml":
-                text = tomli_w.dumps(document.saved(view))
-                header = f"# Saved by xrayraster preview; view 0 is the view on screen:\n# {document.command(what, view)}\n"
-                return _download(header + text, what, "application/toml")
+                text = await preview.run(lambda previewer: document.settings(view, what, previewer.load(document)))
+                return _download(text, what, "application/toml")
             return _download(await preview.run(_saved_view, document, view, what), what,
                              "image/tiff" if what.endswith(".tif") else "image/png")
         except (XrayrasterError, ValueError) as exc:
@@ -173,7 +293,7 @@ def make_app(preview: Preview, *, host: str = "127.0.0.1", port: int = 8000, tok
         if (answer := refusal(request)) is not None:
             return answer
         try:
-            document, view = preview.state(await request.json())
+            document, view = preview.state(_request(await request.body()))
             body = await preview.run(lambda previewer: encode_slice(previewer.quick_slice(document, view)))
             return Response(body, media_type="application/octet-stream")
         except (XrayrasterError, ValueError) as exc:
@@ -189,16 +309,26 @@ def make_app(preview: Preview, *, host: str = "127.0.0.1", port: int = 8000, tok
     return Starlette(routes=routes)
 
 
-async def _answer(ws: WebSocket, preview: Preview, text: str) -> None:
-    """Render one request and send its frame, or its error (the page keeps its last good frame)."""
+def _request(body: str | bytes | None) -> dict:
+    """The JSON object a request's body or WebSocket message holds (``{id, edits, view}``; None: a
+    binary message); XrayrasterError saying what it must be otherwise."""
+    if body is None:
+        raise XrayrasterError("a request must be a text message holding JSON, not binary: {id, edits, view}")
+    try:
+        message = json.loads(body)
+    except (ValueError, RecursionError) as exc:  # not JSON, not UTF-8, or nested beyond reason
+        raise XrayrasterError(f"a request must be JSON: {exc}") from None
+    if not isinstance(message, dict):
+        raise XrayrasterError("a request must be a JSON object: {id, edits, view}")
+    return message
+
+
+async def _answer(ws: WebSocket, preview: Preview, text: str | None) -> None:
+    """Render one request (``text``; None: a binary message) and send its frame, or its error (the
+    page keeps its last good frame)."""
     request_id = None
     try:
-        try:
-            message = json.loads(text)
-        except ValueError as exc:
-            raise XrayrasterError(f"a request must be JSON: {exc}") from None
-        if not isinstance(message, dict):
-            raise XrayrasterError("a request must be a JSON object: {id, edits, view}")
+        message = _request(text)
         request_id = message.get("id")
         document, view = preview.state(message)
         frame = await preview.run(lambda previewer: previewer.frame(document, view))
@@ -219,16 +349,27 @@ def _saved_view(previewer: Previewer, document: Document, view: View, what: str)
         return (tif if what.endswith(".tif") else quicklook_path(tif)).read_bytes()
 
 
+def address(host: str, port: int, token: str | None) -> str:
+    """The page's address as a browser opens it: a server bound to every address (``0.0.0.0``,
+    ``::``, which no browser can open) by this machine's name; with its token when it needs one."""
+    if host in ("0.0.0.0", "::", ""):
+        host = socket.gethostname()
+    shown = f"[{host}]" if ":" in host else host
+    return f"http://{shown}:{port}/" + (f"?token={token}" if token else "")
+
+
 def _download(body, name: str, media_type: str) -> Response:
     return Response(body, media_type=media_type, headers={"Content-Disposition": f'attachment; filename="{name}"'})
 
 
 def serve(path, *, host: str = "127.0.0.1", port: int = 8000, open_browser: bool = False,
-          threads: int | None = None) -> None:
+          threads: int | None = None, deadline_s: float = FRAME_DEADLINE_S) -> None:
     """Serve the preview of the scene or scan file ``path`` at ``host``:``port`` until Ctrl-C (or
-    SIGTERM), which uvicorn turns into a clean shutdown. A bad file fails here, before the server
-    starts. Bound beyond loopback, every request needs the printed address's token."""
-    server, preview, url = _server(path, host, port, threads)
+    SIGTERM), which uvicorn turns into a clean shutdown: within a second or so whatever a frame is
+    doing (a frame still running is left behind, on a daemon thread). A bad file fails here, before
+    the server starts. Bound beyond loopback, every request needs the printed address's token.
+    ``deadline_s``: how long a request waits for its frame (:class:`Preview`)."""
+    server, preview, url = _server(path, host, port, threads, deadline_s)
 
     async def main():
         task = asyncio.create_task(server.serve())
@@ -250,8 +391,10 @@ class Background:
     """A preview served from a thread of this process (a notebook's, a test's): ``url``, and
     :meth:`stop` (or leaving a ``with`` block) shuts it down."""
 
-    def __init__(self, path, *, host: str = "127.0.0.1", port: int = 8000, threads: int | None = None):
-        self._server, self._preview, self.url = _server(path, host, port, threads)
+    def __init__(self, path, *, host: str = "127.0.0.1", port: int = 8000, threads: int | None = None,
+                 deadline_s: float = FRAME_DEADLINE_S):
+        check_listen(host, port, names=("host", "port"))
+        self._server, self._preview, self.url = _server(path, host, port, threads, deadline_s)
         self._thread = threading.Thread(target=lambda: asyncio.run(self._server.serve()), daemon=True,
                                         name="xrayraster-preview-server")
         self._thread.start()
@@ -273,7 +416,7 @@ class Background:
         self.stop()
 
 
-def _server(path, host: str, port: int, threads: int | None):
+def _server(path, host: str, port: int, threads: int | None, deadline_s: float = FRAME_DEADLINE_S):
     """The uvicorn server of ``path``'s preview, the preview and its address (with the token a
     server beyond loopback needs)."""
     document = Document.open(path)
@@ -282,12 +425,25 @@ def _server(path, host: str, port: int, threads: int | None):
         warnings.warn(XrayrasterWarning(f"the preview listens on {host}, beyond this machine's loopback: anyone who "
                                         "can reach it and has the address with its token can use it; prefer the "
                                         "default 127.0.0.1 and an SSH tunnel"), stacklevel=3)
-    preview = Preview(document, threads)
+    preview = Preview(document, threads, deadline_s)
     app = make_app(preview, host=host, port=port, token=token)
-    shown = f"[{host}]" if ":" in host else host
-    url = f"http://{shown}:{port}/" + (f"?token={token}" if token else "")
+    url = address(host, port, token)
     # An open page keeps its WebSocket: shutting down waits a second for it, then closes it. No
     # per-message deflate: zlib took 25 ms of a 512² frame (of noisy levels it barely shrinks).
     config = uvicorn.Config(app, host=host, port=port, log_level="warning", ws="websockets-sansio",
                             ws_per_message_deflate=False, timeout_graceful_shutdown=1)
-    return uvicorn.Server(config), preview, url
+    return _Server(config, preview), preview, url
+
+
+class _Server(uvicorn.Server):
+    """uvicorn's server, which on shutting down first ends the preview's requests that wait on the
+    render thread (:meth:`Preview.abandon`): their handlers return at once, so the shutdown never
+    waits on a frame, nor cancels a handler (uvicorn logs each with a traceback)."""
+
+    def __init__(self, config: uvicorn.Config, preview: Preview):
+        super().__init__(config)
+        self._preview = preview
+
+    async def shutdown(self, sockets=None) -> None:
+        self._preview.abandon()
+        await super().shutdown(sockets)

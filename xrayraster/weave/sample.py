@@ -59,7 +59,7 @@ from .export import (
 from .manifold_mesh import from_manifold, to_manifold
 from .materials import as_yarn_materials
 from .resolve import interpenetration, resolve_boolean
-from .size import weave_estimate
+from .size import SAMPLE_DEFAULTS, weave_estimate
 from .spec import UnitCell
 from .sweep import bend_sagitta_mm, polygon_area
 from .yarn import LABELS, PRIORITIES, Yarn, section_outline
@@ -117,10 +117,10 @@ class Sample:
     """
 
     cell: UnitCell
-    cells: tuple[int, int] = (1, 1)
-    layers_of_cells: int = 1
-    points_per_section: int = 24
-    samples_per_mm: float = 4.0
+    cells: tuple[int, int] = SAMPLE_DEFAULTS["cells"]
+    layers_of_cells: int = SAMPLE_DEFAULTS["layers_of_cells"]
+    points_per_section: int = SAMPLE_DEFAULTS["points_per_section"]
+    samples_per_mm: float = SAMPLE_DEFAULTS["samples_per_mm"]
     extend: float = 0.5
     distortion: Distortion = field(default_factory=Distortion)
     seed: int = 0

@@ -327,6 +327,20 @@ class UnitCell:
     @classmethod
     def from_dict(cls, d: dict, where: str = "[weave]") -> "UnitCell":
         """A unit cell from its dict form; errors name ``where`` and the field. Missing keys take defaults."""
+        return cls.from_arguments(cls.arguments_from_dict(d, where), where)
+
+    @classmethod
+    def from_arguments(cls, kwargs: dict, where: str = "[weave]") -> "UnitCell":
+        """``UnitCell(**kwargs)`` (from :meth:`arguments_from_dict`), its errors ConfigErrors naming ``where``."""
+        try:
+            return cls(**kwargs)
+        except WeaveError as exc:
+            raise ConfigError(f"{where}: {exc}") from None
+
+    @staticmethod
+    def arguments_from_dict(d: dict, where: str = "[weave]") -> dict:
+        """The keyword arguments of the unit cell of a dict form, each value's type and range checked,
+        before the cell is built (building generates every binder's path: a size to check first)."""
         d = fields.mapping(d, where)
         fields.only(d, _KEYS, where)
         kwargs = {}
@@ -357,10 +371,7 @@ class UnitCell:
         for key in ("weft_section", "warp_section"):
             if key in d:
                 kwargs[key] = Section.from_dict(d[key], key, where)
-        try:
-            return cls(**kwargs)
-        except WeaveError as exc:
-            raise ConfigError(f"{where}: {exc}") from None
+        return kwargs
 
 
 
