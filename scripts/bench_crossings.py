@@ -35,7 +35,7 @@ from xrayraster.gl.pathlengths import PathLengthRenderer
 from xrayraster.physics.beer_lambert import pixel_photon_factor
 from xrayraster.physics.detector import Detector
 from xrayraster.physics.radiograph import radiograph, spectral_model
-from xrayraster.pipeline import draw, load_dataset_file
+from xrayraster.dataset import draw, load_dataset_file
 
 from .common import announce, conclude, outputs, parser, say
 

@@ -39,7 +39,7 @@ import numpy as np
 import tifffile
 
 import xrayraster as xr
-from xrayraster.pipeline import draw, load_dataset_file
+from xrayraster.dataset import draw, load_dataset_file
 
 from .common import OUT, ROOT, announce, conclude, outputs, parser, pyplot, say
 

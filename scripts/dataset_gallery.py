@@ -16,7 +16,7 @@ from pathlib import Path
 
 import xrayraster as xr
 from xrayraster.core.pictures import write_gallery
-from xrayraster.pipeline import draw, load_dataset_file
+from xrayraster.dataset import draw, load_dataset_file
 from xrayraster.weave.yarn import LABELS
 
 from .common import DOCS, ROOT, say

@@ -50,7 +50,7 @@ from pathlib import Path
 import numpy as np
 
 import xrayraster as xr
-from xrayraster.pipeline.dataset_file import load_dataset_file
+from xrayraster.dataset.dataset_file import load_dataset_file
 
 from .common import OUT, ROOT, announce, conclude, cores, outputs, parser, pyplot, save, say
 

@@ -29,8 +29,8 @@ import pytest
 import xrayraster as xr
 from xrayraster import cli
 from xrayraster.core.errors import ConfigError
-from xrayraster.pipeline import dataset as dataset_module
-from xrayraster.pipeline import load_dataset_file
+from xrayraster.dataset import build as dataset_module
+from xrayraster.dataset import load_dataset_file
 from xrayraster.pipeline.scan import ScanResult
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -194,7 +194,7 @@ def test_an_address_where_no_scheduler_listens_is_refused(address, tmp_path, cap
 TIMED = """
 import sys
 from xrayraster import cli
-from xrayraster.pipeline import dataset
+from xrayraster.dataset import build as dataset
 dataset.SCHEDULER_TIMEOUT_S = 2.0
 sys.exit(cli.main(sys.argv[1:]))
 """
@@ -263,7 +263,7 @@ def test_a_run_refused_for_its_size_leaves_the_directory_as_it_was(quick, tmp_pa
     before = hashes(out)
     real = shutil.disk_usage
     with monkeypatch.context() as m:
-        m.setattr("xrayraster.pipeline.dataset.shutil.disk_usage", lambda p: real(p)._replace(free=10**6))
+        m.setattr("xrayraster.dataset.build.shutil.disk_usage", lambda p: real(p)._replace(free=10**6))
         err = refused(capsys, "build", str(dataset_file(tmp_path, count=100_000)), "-o", str(out), "--quiet")
     assert "99998 samples need about" in err
     assert hashes(out) == before
@@ -458,7 +458,7 @@ def test_pool_workers_are_started_deaf_to_ctrl_c(tmp_path):
 
 TERMINATED = """
 import multiprocessing, sys, time
-from xrayraster.pipeline.dataset import _init_worker
+from xrayraster.dataset.build import _init_worker
 
 def sample(_):
     from tqdm import tqdm

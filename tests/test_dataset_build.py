@@ -21,7 +21,7 @@ import tifffile
 
 import xrayraster as xr
 from xrayraster import cli
-from xrayraster.pipeline import draw, load_dataset_file
+from xrayraster.dataset import draw, load_dataset_file
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -152,7 +152,7 @@ def test_a_foreign_directory_or_a_file_name_is_refused(tmp_path, capsys):
 
 
 def test_a_sample_that_fails_twice_is_recorded_and_the_exit_status_says_so(gl, cl, tmp_path, monkeypatch, capsys):
-    from xrayraster.pipeline import dataset
+    from xrayraster.dataset import build as dataset
 
     real = dataset.build_sample
     calls = []
@@ -269,8 +269,8 @@ def test_a_scheduler_and_two_workers_started_apart_give_the_same_bytes(reference
 SOAK = """
 import json, os, sys
 from pathlib import Path
-from xrayraster.pipeline import load_dataset_file
-from xrayraster.pipeline.dataset import build_sample
+from xrayraster.dataset import load_dataset_file
+from xrayraster.dataset.build import build_sample
 
 dataset = load_dataset_file(sys.argv[1])
 rss = []
@@ -341,7 +341,7 @@ def test_a_build_that_cannot_fit_on_the_disk_is_refused_before_the_first_sample(
     import shutil as shutil_module
 
     real = shutil_module.disk_usage
-    monkeypatch.setattr("xrayraster.pipeline.dataset.shutil.disk_usage",
+    monkeypatch.setattr("xrayraster.dataset.build.shutil.disk_usage",
                         lambda path: real(path)._replace(free=100_000))
     assert cli.main(["build", str(tiny(tmp_path)), "-o", str(tmp_path / "out"), "--quiet"]) == 2
     err = capsys.readouterr().err

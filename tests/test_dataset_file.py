@@ -11,16 +11,9 @@ import numpy as np
 import pytest
 
 from xrayraster.core.errors import ConfigError
-from xrayraster.pipeline import (
-    differences,
-    draw,
-    fingerprint,
-    format_plan,
-    load_dataset_file,
-    load_scan_file,
-    plan_rows,
-)
-from xrayraster.pipeline.distributions import Choice, Integer, LogUniform, Normal, Uniform, distribution_from
+from xrayraster.dataset import differences, draw, fingerprint, format_plan, load_dataset_file, plan_rows
+from xrayraster.dataset.distributions import Choice, Integer, LogUniform, Normal, Uniform, distribution_from
+from xrayraster.pipeline import load_scan_file
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = ROOT / "examples"
@@ -118,7 +111,7 @@ def test_all_impossible_draws_name_the_keys_and_the_reason():
 
 def test_split_fractions():
     dataset = load_dataset_file(table(count=1, splits={"train": 0.7, "val": 0.2, "test": 0.1}))
-    from xrayraster.pipeline.dataset_file import _child, _split
+    from xrayraster.dataset.dataset_file import _child, _split
 
     splits = [_split(dataset.splits, np.random.default_rng(_child(np.random.SeedSequence(3, spawn_key=(i,)),
                                                                    "split")).random()) for i in range(5000)]

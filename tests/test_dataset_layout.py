@@ -1,4 +1,4 @@
-"""The dataset layouts (xrayraster/io/dataset_layout.py, docs/dataset_layouts.md): files where the
+"""The dataset layouts (xrayraster/dataset/layouts.py, docs/dataset_layouts.md): files where the
 docs say, data and voxel size read back by independent readers (tifffile, nibabel, h5py), nnU-Net's
 dataset.json fields, atomic samples (a sample whose writer fails or is killed is not finished and
 leaves nothing visible; a rerun completes it), the same bytes for the same input, manifest.csv."""
@@ -22,7 +22,7 @@ import pytest
 
 import xrayraster as xr
 from xrayraster.core import files
-from xrayraster.io.dataset_layout import GENERATOR, HDF5_CHUNK, LAYOUTS
+from xrayraster.dataset.layouts import GENERATOR, HDF5_CHUNK, LAYOUTS
 from xrayraster.pipeline.scan import ScanResult
 
 h5py = pytest.importorskip("h5py")

@@ -18,7 +18,7 @@ import pytest
 
 import xrayraster as xr
 from xrayraster.core.errors import ConfigError
-from xrayraster.io.dataset_layout import LAYOUTS
+from xrayraster.dataset.layouts import LAYOUTS
 from xrayraster.ml.patches import strided
 from xrayraster.pipeline.scan import ScanResult
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import xrayraster as xr
-from xrayraster.io.dataset_layout import LAYOUTS
+from xrayraster.dataset.layouts import LAYOUTS
 from xrayraster.pipeline.scan import ScanResult
 
 from test_ml_patches import write_build

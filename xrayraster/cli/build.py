@@ -15,9 +15,9 @@ import sys
 from pathlib import Path
 
 from ..core.errors import ConfigError
-from ..pipeline.dataset import build
-from ..pipeline.dataset_file import load_dataset_file
-from ..pipeline.dataset_plan import plan_lines
+from ..dataset.build import build
+from ..dataset.dataset_file import load_dataset_file
+from ..dataset.plan import plan_lines
 from .options import positive_int
 
 

@@ -1,5 +1,5 @@
-"""Files: TOML scene files, JSON scan files, TIFF stacks and their metadata, quick-look PNGs, and the
-on-disk layouts of dataset builds (``dataset_layout``: TIFF, nnU-Net NIfTI, HDF5)."""
+"""Files: TOML scene files, JSON scan files, TIFF stacks and their metadata, quick-look PNGs. The
+on-disk layouts of dataset builds are the dataset layer's (``xrayraster.dataset.layouts``)."""
 
 from .tiff import (
     read_projections,

@@ -22,10 +22,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.choices import DATASET_SPLITS
 from ..core.errors import ConfigError
-from ..io.dataset_layout import LAYOUTS, SPLITS
+from ..dataset.layouts import LAYOUTS
+from ..dataset.names import RECORD_NAME
 from ..io.optional import optional_module
-from ..pipeline.dataset import RECORD_NAME
 
 
 @dataclass(frozen=True)
@@ -58,11 +59,11 @@ class BuiltDataset:
 
     def indices(self, split: str | None) -> list[int]:
         """The samples of ``split`` (None: all), in order; ConfigError for an unknown or empty split."""
-        if split is not None and split not in SPLITS:
-            raise ConfigError(f"split must be one of {', '.join(SPLITS)} or None (all), got {split!r}")
+        if split is not None and split not in DATASET_SPLITS:
+            raise ConfigError(f"split must be one of {', '.join(DATASET_SPLITS)} or None (all), got {split!r}")
         chosen = sorted(i for i, s in self.splits.items() if split is None or s == split)
         if not chosen:
-            counts = {s: sum(v == s for v in self.splits.values()) for s in SPLITS}
+            counts = {s: sum(v == s for v in self.splits.values()) for s in DATASET_SPLITS}
             raise ConfigError(f"{self.root}: no sample in split {split!r} (the build's splits: {counts})")
         return chosen
 

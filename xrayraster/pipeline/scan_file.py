@@ -46,7 +46,8 @@ from .pose import Pose
 
 __all__ = ["ScanFile", "ScanOptions", "load_scan_file", "mesh_resolution_for"]
 
-_TABLES = {"geometry", "objects", "weave", "mount", "materials", "source", "detector", "volume", "scan", "pose"}
+# The tables a scan file may hold (a dataset file holds them too, inline: dataset/dataset_file.py).
+TABLES = {"geometry", "objects", "weave", "mount", "materials", "source", "detector", "volume", "scan", "pose"}
 
 
 @dataclass(frozen=True)
@@ -171,7 +172,7 @@ def load_scan_file(source, *, where: str = "scan table", base_dir=None) -> ScanF
     else:
         path = Path(source)
         data, base = read_toml(path, "scan file"), path.parent
-    fields.only(data, _TABLES, f"{path}")
+    fields.only(data, TABLES, f"{path}")
     has_objects, has_weave = "objects" in data, "weave" in data
     if has_objects == has_weave:
         raise ConfigError(f"{path}: give the sample as [[objects]] (meshes) or as a [weave] table, "

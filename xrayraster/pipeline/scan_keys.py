@@ -28,7 +28,7 @@ from ..core.volume import VolumeGeometry
 from ..weave.distort import Distortion
 from ..weave.spec import Section, UnitCell
 from .pose import _KEYS as _POSE_KEYS
-from .scan_file import _TABLES, ScanOptions
+from .scan_file import TABLES, ScanOptions
 
 __all__ = ["absolute_paths", "check_key", "set_key"]
 
@@ -70,7 +70,7 @@ def check_key(key: str, base: dict, where: str) -> None:
     tables, or of values as the last part: ``pose.tilt_deg.2``), and no part below a plain value
     of the base."""
     parts = key.split(".")
-    tree, table = {**KEYS, **dict.fromkeys(_TABLES - set(KEYS), ANY)}, base
+    tree, table = {**KEYS, **dict.fromkeys(TABLES - set(KEYS), ANY)}, base
     for i, part in enumerate(parts):
         above = ".".join(parts[:i]) or "the scan file"
         if tree is None and isinstance(table, list) and i == len(parts) - 1:

@@ -25,7 +25,7 @@ from ..core.errors import ConfigError
 from ..core.validate import show
 from ..io.scene_file import load_scene_file, read_toml
 from ..io.weave_file import DEFAULT_SOURCE
-from ..pipeline.dataset_file import refuse_dataset_table
+from ..dataset.dataset_file import refuse_dataset_table
 from ..pipeline.scan_file import load_scan_file
 from ..pipeline.scan_keys import INDEX, PATH_KEYS, absolute_paths, check_key, set_key
 

@@ -32,20 +32,20 @@ from typing import TYPE_CHECKING, Callable, Protocol
 
 import numpy as np
 
+from ..core.choices import DATASET_SPLITS
 from ..core.errors import ConfigError
 from ..core.files import atomic_directory, atomic_write, atomic_write_text, atomic_writes
 from ..core.ownership import read_record
+from ..io.optional import optional_module
 from .manifest import json_ready, write_manifest
+from .names import GENERATOR
 from .nifti import nifti_writer
-from .optional import optional_module
 
 if TYPE_CHECKING:
     from ..core.projections import Projections
     from ..gl.voxelize import LabelVolume
     from ..recon.volume import Volume
 
-GENERATOR = "xrayraster build"
-SPLITS = ("train", "val", "test")
 TRAINING_SPLITS = ("train", "val")  # nnU-Net trains (and cross-validates) on these; "test" is held out
 MAX_LABEL = 255  # labels are stored as uint8
 SAMPLE_JSON, EXTRAS_JSON, MANIFEST_CSV = "sample.json", "extras.json", "manifest.csv"
@@ -124,8 +124,9 @@ def stored_record(index: int, result: ScanOutput, record: dict) -> dict:
     known ``split``."""
     if record.get("index", index) != index:
         raise ConfigError(f"sample {index}: its record says index {record['index']}")
-    if record.get("split") not in SPLITS:
-        raise ConfigError(f"sample {index}: split must be one of {', '.join(SPLITS)}, got {record.get('split')!r}")
+    if record.get("split") not in DATASET_SPLITS:
+        raise ConfigError(f"sample {index}: split must be one of {', '.join(DATASET_SPLITS)}, "
+                          f"got {record.get('split')!r}")
     counts = np.bincount(np.asarray(result.labels.data).ravel())
     fractions = {str(label): count / counts.sum() for label, count in enumerate(counts.tolist()) if count}
     return {**record, "index": index, "fractions": fractions}
@@ -352,7 +353,7 @@ class NnunetLayout:
         if sorted(names) != list(range(len(names))):
             raise ConfigError(f"nnU-Net needs consecutive labels 0, 1, 2, ...; the build's are {sorted(names)}")
         cases = {split: [self.case(i, name) for i in sorted(records) if records[i]["split"] == split]
-                 for split in SPLITS}
+                 for split in DATASET_SPLITS}
         dataset = {
             "name": name,
             "description": f"written by {GENERATOR}; one CT channel, linear attenuation in 1/cm",

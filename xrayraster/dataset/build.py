@@ -2,7 +2,7 @@
 
 Each sample is ``xr.scan`` of one drawn scan table (:func:`~.dataset_file.draw`: the master seed
 and the sample's index decide it, nothing else), written in the dataset's layout
-(:mod:`.dataset_layout`) under a temporary name and moved into place when complete. So a build can
+(:mod:`.layouts`) under a temporary name and moved into place when complete. So a build can
 be killed at any moment and rerun: finished samples are skipped, partial ones (hidden
 temporaries) removed and redone, and the files are the same bytes as an uninterrupted build's,
 with one worker or many, on a process pool or on Dask.
@@ -50,19 +50,19 @@ from ..core.files import (atomic_write_text, directory_target, probe_writable, r
 from ..core.ownership import directory_entries, read_record
 from ..core.pictures import write_gallery
 from ..core.provenance import package_version
-from ..io.dataset_layout import LAYOUTS
+from ..pipeline.scan import scan
+from ..pipeline.woven import weave
 from .dataset_file import DatasetFile, differences, draw, fingerprint, identity, load_dataset_file
-from .dataset_plan import check_sample, sample_bytes
 from .distributions import Fixed
-from .scan import scan
-from .woven import weave
+from .layouts import LAYOUTS
+from .names import GENERATOR, RECORD_NAME
+from .plan import check_sample, sample_bytes
 
 __all__ = ["BuildReport", "build", "build_sample"]
 
 log = logging.getLogger(__name__)
 
-GENERATOR = "xrayraster build"
-RECORD_NAME, FAILED_NAME, GALLERY_NAME = "build.json", "failed.csv", "gallery.png"
+FAILED_NAME, GALLERY_NAME = "failed.csv", "gallery.png"
 GALLERY_SAMPLES = 6  # the first finished samples the gallery shows
 # Keys of a scan's metadata that differ between two runs of the same sample, kept out of its files:
 # wall times, the memory peak, and the devices (an OpenCL CPU device's description counts the
@@ -303,8 +303,8 @@ def _check_sample_folders(root: Path, layout, todo: list[int], name: str) -> Non
 
 def _check_first_sample(dataset: DatasetFile, root: Path, todo: list[int]) -> None:
     """Refuse, before any work, what the samples left would fail on, from the first one: a scan that
-    cannot fit in memory (:func:`~.dataset_plan.check_sample`, as ``xr.scan`` would refuse it), and
-    samples that cannot fit on the disk (its size, :func:`~.dataset_plan.sample_bytes`, times their
+    cannot fit in memory (:func:`~.plan.check_sample`, as ``xr.scan`` would refuse it), and
+    samples that cannot fit on the disk (its size, :func:`~.plan.sample_bytes`, times their
     number)."""
     if not todo:
         return

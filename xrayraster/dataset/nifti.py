@@ -19,7 +19,7 @@ from collections.abc import Callable
 import numpy as np
 
 from ..core.volume import VolumeGeometry
-from .optional import optional_module
+from ..io.optional import optional_module
 
 # zlib's default. Measured on 128³ noisy float32 + uint8 labels: levels 1 and 6 take the same time
 # (≈0.37 s; a reconstruction's noisy mantissas hardly compress at any level) and 6 makes the labels

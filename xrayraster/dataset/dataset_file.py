@@ -29,11 +29,11 @@ from ..core import fields
 from ..core.choices import DATASET_KEEP, DATASET_LAYOUTS, DATASET_SPLITS
 from ..core.errors import ConfigError, GeometryError, WeaveError
 from ..core.validate import show
-from ..io.dataset_layout import NAME_RULE, check_name
 from ..io.scene_file import read_toml
+from ..pipeline.scan_file import TABLES, ScanFile, load_scan_file
+from ..pipeline.scan_keys import ANY, INDEX, KEYS, absolute_paths, check_key, set_key
 from .distributions import KINDS, Distribution, Fixed, distribution_from, is_distribution
-from .scan_file import _TABLES, ScanFile, load_scan_file
-from .scan_keys import ANY, INDEX, KEYS, absolute_paths, check_key, set_key
+from .layouts import NAME_RULE, check_name
 
 __all__ = ["DatasetFile", "Draw", "differences", "draw", "fingerprint", "identity", "is_dataset_table",
            "load_dataset_file", "refuse_dataset_table"]
@@ -56,7 +56,7 @@ class DatasetFile:
     """A loaded dataset file. ``base``: the base scan's table, its relative file paths made absolute
     against the base scan file's directory; ``splits``: split name → fraction, in
     :data:`~xrayraster.core.choices.DATASET_SPLITS` order; ``vary``: dotted scan-file key → its
-    :mod:`~xrayraster.pipeline.distributions` distribution; ``directory``: what relative file paths
+    :mod:`~xrayraster.dataset.distributions` distribution; ``directory``: what relative file paths
     among ``[vary]``'s values are relative to (the dataset file's directory, or ``base_dir``)."""
 
     path: Path | None
@@ -105,7 +105,7 @@ def load_dataset_file(source, *, base_dir=None) -> DatasetFile:
         # Absolute and normalised: the samples' metadata names the file, the same however it was spelt.
         path = Path(os.path.abspath(source))
         data, where, directory = read_toml(path, "dataset file"), str(path), path.parent
-    fields.only(data, {"base", "dataset", "vary", *_TABLES}, where)
+    fields.only(data, {"base", "dataset", "vary", *TABLES}, where)
     base = _base(data, directory, where, path)
     settings = fields.table(fields.required(data, "dataset", where), "dataset", where)
     dataset = DatasetFile(path, base, vary=_vary(fields.table(data.get("vary", {}), "vary", where), base, where),
@@ -180,7 +180,7 @@ def differences(a: DatasetFile | dict, b: DatasetFile | dict) -> list[str]:
 def _base(data: dict, directory: Path, where: str, own: Path | None) -> dict:
     """The base scan table: the file ``base`` names or the inline tables, its file paths made absolute.
     ``own``: the dataset file's path (None for a table), which ``base`` may not name."""
-    inline = {k: v for k, v in data.items() if k in _TABLES}
+    inline = {k: v for k, v in data.items() if k in TABLES}
     if "base" in data:
         if inline:
             raise ConfigError(f"{where}: give the base scan as base = \"scan.toml\" or as inline tables, not both "
@@ -191,7 +191,7 @@ def _base(data: dict, directory: Path, where: str, own: Path | None) -> dict:
             raise ConfigError(f"{where}: base = {show(data['base'])} names this dataset file itself; base names the "
                               "scan file every sample starts from (docs/scan.md), or give its tables inline")
         refuse_dataset_table(table, f"{where}: base = {show(data['base'])}", "a scan file (docs/scan.md)")
-        fields.only(table, _TABLES, str(path))
+        fields.only(table, TABLES, str(path))
         return absolute_paths(table, path.parent.absolute())
     if not inline:
         raise ConfigError(f"{where}: no base scan; add base = \"twin_small.toml\" (a scan file, relative to this "
@@ -228,7 +228,7 @@ def _settings(d: dict, path: Path | None, where: str) -> dict:
 
 def _name(d: dict, path: Path | None, where: str) -> str:
     """``[dataset] name``, or by default the file's name, other characters as ``_``; refused unless
-    it is a dataset name (io.dataset_layout.check_name: the one rule of every layout)."""
+    it is a dataset name (layouts.check_name: the one rule of every layout)."""
     if "name" in d:
         return check_name(fields.string(d["name"], "name", where), where)
     default = re.sub(r"[^A-Za-z0-9_]", "_", path.stem) if path is not None else "dataset"

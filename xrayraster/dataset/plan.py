@@ -13,9 +13,9 @@ from __future__ import annotations
 import json
 from collections.abc import Iterator
 
+from ..pipeline.plan import check_scan
+from ..pipeline.scan import BATCH_VIEWS
 from .dataset_file import DatasetFile, draw
-from .plan import check_scan
-from .scan import BATCH_VIEWS
 
 __all__ = ["PLAN_DRAWS", "check_sample", "format_plan", "plan_lines", "plan_rows", "sample_bytes"]
 
