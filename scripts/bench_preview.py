@@ -29,12 +29,13 @@ from pathlib import Path
 import numpy as np
 
 import xrayraster as xr
+from references.browser import headless_chromium
 from xrayraster.pipeline import load_scan_file
 from xrayraster.preview.encoding import LEVELS
 from xrayraster.preview.frames import turned
 from xrayraster.preview.server import Background
 
-from .common import OUT, ROOT, announce, conclude, headless_chromium, outputs, parser, say
+from .common import OUT, ROOT, announce, conclude, outputs, parser, say
 
 SIZES = {"full": (512, 0.134867, 0.04), "quick": (128, 0.539467, 0.25)}  # pixels, pitch mm, mesh tolerance (voxels)
 

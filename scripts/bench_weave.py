@@ -7,7 +7,7 @@ examples/weave.toml) tiled n × n for n = 1, 2, 4, 8, with the distortion amplit
 examples/weave.toml's ``[weave.distortion]`` (read from that file), ``seed=1``, at two resolutions:
 *default* (``points_per_section=24``, ``samples_per_mm=4``) and *coarse* (12, 2). TexGen builds the
 same layer-to-layer weave, undistorted (its layer-to-layer textile has no random distortions), with
-its ``resolution`` (points per cross-section) 24 and 12 (scripts/peers/texgen_peer.py).
+its ``resolution`` (points per cross-section) 24 and 12 (references/texgen.py).
 
 What is timed (one fresh child process per case)
 ------------------------------------------------
@@ -52,6 +52,7 @@ Usage::
 
     python -m scripts.bench_weave           # 7–9 min on 2 cores
     python -m scripts.bench_weave --quick   # 1 × 1 cell, coarse, one call each: a smoke test
+    python -m scripts.bench_weave --self-check  # only the budget's predictions
 
 Prints a table, writes out/bench_weave.json (``--quick``: out/bench_weave_quick.json) and plots
 docs/bench_weave.png (``--quick``: out/bench_weave_quick.png).
@@ -101,7 +102,8 @@ def tessellation_error(points_per_section: int, samples_per_mm: float) -> dict:
     warp = section_error_mm(cell.warp_section, cell.warp_width, cell.warp_height, points_per_section)
     radius = binder_bend_radius_mm(cell)
     path = path_error_mm(radius, samples_per_mm, cell.warp_height / 2)
-    return {"weft_section_mm": weft, "warp_section_mm": warp, "section_mm": max(weft, warp),
+    return {"points_per_section": points_per_section, "samples_per_mm": samples_per_mm,
+            "weft_section_mm": weft, "warp_section_mm": warp, "section_mm": max(weft, warp),
             "binder_bend_radius_mm": radius, "path_mm": path, "total_mm": max(weft, warp) + path}
 
 
@@ -113,6 +115,18 @@ def predicted_s(smaller: dict | None, n: int) -> float | None:
     if "call_s" not in smaller:
         return math.inf
     return smaller["call_s"] * GROWTH ** math.log2(n / smaller["cells"])
+
+
+def self_check() -> bool:
+    """Whether :func:`predicted_s` grows by GROWTH per doubling and skips after a skip (``--self-check``)."""
+    smaller = {"cells": 2, "call_s": 3.0}
+    checks = {"no smaller case, no prediction": predicted_s(None, 1) is None,
+              "one doubling": math.isclose(predicted_s(smaller, 4), 3.0 * GROWTH),
+              "two doublings": math.isclose(predicted_s(smaller, 8), 3.0 * GROWTH ** 2),
+              "skipped after a skip": predicted_s({"cells": 4, "skipped": True}, 8) == math.inf}
+    for name, ok in checks.items():
+        say(f"budget self-check, {name}: {'ok' if ok else 'FAILED'}")
+    return all(checks.values())
 
 
 # ---------------------------------------------------------------------------------------------
@@ -132,7 +146,7 @@ def run_case(kind: str, n: int, resolution: str, repeats: int) -> dict:
     k, rate = RESOLUTIONS[resolution]
     distortion = load_weave_file(WEAVE_FILE).sample.distortion
     if kind == "texgen":
-        from scripts.peers import texgen_peer
+        from references import texgen as texgen_peer
 
         reason = texgen_peer.texgen_available()  # loads pytexgen before the baseline is read
         if reason is not None:
@@ -328,7 +342,10 @@ def main(argv=None) -> int:
     ap.add_argument("--case", nargs=3, metavar=("KIND", "N", "RESOLUTION"), help="internal: run one case in this "
                     "process and print its record as JSON")
     ap.add_argument("--repeats", type=int, default=REPEATS, help="calls per case at most (default 3; --quick: 1)")
+    ap.add_argument("--self-check", action="store_true", help="only check the budget's predictions")
     args = common.outputs(ap.parse_args(argv), "bench_weave")
+    if args.self_check:
+        return 0 if self_check() else 1
     if args.case:
         kind, n, resolution = args.case
         print(json.dumps(run_case(kind, int(n), resolution, args.repeats)), flush=True)
@@ -340,7 +357,7 @@ def main(argv=None) -> int:
 
     start = time.perf_counter()
     command, machine = common.announce()
-    from scripts.peers import texgen_peer
+    from references import texgen as texgen_peer
 
     reason = "disabled (--no-texgen)" if args.no_texgen else texgen_peer.texgen_available()
     machine.update({dist: common.package_version(dist) for dist in ("pytexgen", "manifold3d", "trimesh")})

@@ -4,6 +4,7 @@ one of its shifts taken back at a time, scored by the network scripts/train_segm
 
     python -m scripts.ml_shift_ablation            # 3 samples a variant, ~6 min on 2 cores
     python -m scripts.ml_shift_ablation --quick    # 1 sample a variant, with the --quick run's network
+    python -m scripts.ml_shift_ablation --check    # only check the variants against the example files
 
 Each variant is the shifted dataset file with some lines replaced (VARIANTS: the training set's
 value or range, or the line removed), built with its own 3 samples (the same seeds as the shifted
@@ -55,11 +56,36 @@ def variant_text(base: str, edits: dict, count: int) -> str:
     return text
 
 
+def check() -> int:
+    """0 when every variant takes back what it says (:func:`variant_text` asserts that each pattern
+    matches one line) and TRAINING_WEAVE's ranges are those of examples/ml_train.toml; 1 otherwise."""
+    base = (ROOT / "examples" / "ml_shifted.toml").read_text()
+    train = (ROOT / "examples" / "ml_train.toml").read_text()
+    failures = []
+    for name, edits in VARIANTS.items():
+        try:
+            text = variant_text(base, edits, 3)
+        except AssertionError as exc:
+            failures.append(f"{name}: {exc}")
+            continue
+        if "count = 3" not in text or text == base:
+            failures.append(f"{name}: the variant changes nothing")
+    failures += [f"not in examples/ml_train.toml: {r}" for r in TRAINING_WEAVE.values() if r not in train]
+    for line in failures:
+        say(f"FAILED: {line}")
+    say(f"{len(VARIANTS)} variants checked: " + ("FAILED" if failures else "ok"))
+    return 1 if failures else 0
+
+
 def main(argv=None) -> int:
     ap = parser(__doc__, "1 sample a variant, with the --quick run's network (out/ml_quick/model.pt)")
     ap.add_argument("--trained", type=Path, help="the training run's folder (default out/ml; --quick: out/ml_quick)")
     ap.add_argument("--out", type=Path, help="the variants' builds (default out/ml_ablation; --quick: out/ml_ablation_quick)")
+    ap.add_argument("--check", action="store_true", help="only check that every variant's patterns match one line "
+                    "each of examples/ml_shifted.toml and the training weave's ranges are examples/ml_train.toml's")
     args = outputs(ap.parse_args(argv), "ml_shift_ablation")
+    if args.check:
+        return check()
     t_start = time.perf_counter()
     command, machine = announce()
     model, patch, order, normalize = load_model(args.trained or OUT / ("ml_quick" if args.quick else "ml"))

@@ -50,6 +50,7 @@ from pathlib import Path
 import numpy as np
 
 import xrayraster as xr
+from references.segmentation import baseline, confusion, dice_from_confusion
 from xrayraster.dataset.dataset_file import load_dataset_file
 
 from .common import OUT, ROOT, announce, conclude, cores, outputs, parser, pyplot, save, say
@@ -262,10 +263,10 @@ def score_set(model, root, split: str, patch: int, order: list[int], normalize):
             for name, labels in outputs.items():
                 counts = confusion(truth[keep], labels[keep], len(order))
                 results[name]["confusion"] += counts
-                results[name]["per_volume"].append(dice_from_confusion(counts))
+                results[name]["per_volume"].append(dice_from_confusion(counts, SCORED))
                 example["predicted"].setdefault(name, labels[middle])
     for r in results.values():
-        total = dice_from_confusion(r["confusion"])
+        total = dice_from_confusion(r["confusion"], SCORED)
         r["dice"] = {NAMES[c]: total[c] for c in SCORED}
         r["mean_dice"] = float(np.mean([total[c] for c in SCORED]))
         r["mean_dice_per_volume"] = [float(np.mean([d[c] for c in SCORED])) for d in r["per_volume"]]
@@ -277,39 +278,6 @@ def score_set(model, root, split: str, patch: int, order: list[int], normalize):
 def best_baseline(results: dict) -> str:
     """The method other than the network with the highest mean Dice in ``results``."""
     return max((m for m in results if not m.startswith("network")), key=lambda m: results[m]["mean_dice"])
-
-
-def baseline(name: str, smooth: str, order: list[int]):
-    """A classical segmentation: ``smooth`` then ``name``, its classes matched to ``order`` by their means."""
-    from scipy import ndimage
-
-    def segment(volume: np.ndarray) -> np.ndarray:
-        v = ndimage.median_filter(volume, size=3) if smooth.startswith("median") else ndimage.gaussian_filter(volume, 1.0)
-        k = len(order)
-        if name == "multi-Otsu":
-            from skimage.filters import threshold_multiotsu
-
-            clusters = np.digitize(v, threshold_multiotsu(v, classes=k))  # already in the order of the means
-        else:
-            from sklearn.mixture import GaussianMixture
-
-            sample = np.random.default_rng(0).choice(v.ravel(), size=min(v.size, 200_000), replace=False)
-            mixture = GaussianMixture(k, random_state=0).fit(sample[:, None])
-            rank = np.argsort(np.argsort(mixture.means_.ravel()))
-            clusters = rank[mixture.predict(v.reshape(-1, 1))].reshape(v.shape)
-        return np.asarray(order, np.uint8)[clusters]
-
-    return segment
-
-
-def confusion(truth: np.ndarray, predicted: np.ndarray, k: int) -> np.ndarray:
-    """Voxels by (true label, predicted label)."""
-    return np.bincount((truth.astype(np.int64) * k + np.minimum(predicted, k - 1)).ravel(), minlength=k * k).reshape(k, k)
-
-
-def dice_from_confusion(m: np.ndarray) -> dict:
-    """Dice of each scored label from a confusion matrix (true label by row, predicted by column)."""
-    return {c: 2 * float(m[c, c]) / max(float(m[c, :].sum() + m[:, c].sum()), 1.0) for c in SCORED}
 
 
 def curve_plot(losses: list[float], path: Path) -> Path | None:

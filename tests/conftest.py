@@ -55,7 +55,7 @@ def cl():
 @pytest.fixture(scope="session")
 def browser():
     """Debian's Chromium, headless, driven by Selenium (the preview's page tests)."""
-    from scripts.common import CHROMEDRIVER, CHROMIUM, headless_chromium
+    from references.browser import CHROMEDRIVER, CHROMIUM, headless_chromium
 
     missing = [p for p in (CHROMIUM, CHROMEDRIVER) if not os.path.exists(p)]
     if missing:

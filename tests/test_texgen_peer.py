@@ -1,4 +1,4 @@
-"""The TexGen peer (scripts/peers/texgen_peer.py): its overlap measure, its input checks and, where
+"""The TexGen peer (references/texgen.py): its overlap measure, its input checks and, where
 pytexgen is installed, the frame and pattern mapping of TexGen's layer-to-layer textile."""
 
 import math
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from scripts.peers.texgen_peer import (
+from references.texgen import (
     texgen_available,
     texgen_layer_to_layer,
     yarn_overlap,

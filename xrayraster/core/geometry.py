@@ -389,7 +389,7 @@ def geometry_from_dict(d: dict, where: str = "geometry"):
         for key in sorted({"source_to_origin", "source_to_detector"} & set(d)):
             raise ConfigError(f"{where}: '{key}' has no meaning for beam = 'parallel' (there is no source point); "
                               "drop it, or set beam = 'cone'")
-    fields.only(d, _SCAN_KEYS[beam], where)
+    fields.only(d, SCAN_KEYS[beam], where)
     common = dict(
         detector_shape=shape,
         pixel_size=fields.one_or_pair(fields.required(d, "pixel_size", where), "pixel_size", where,
@@ -412,8 +412,9 @@ def geometry_from_dict(d: dict, where: str = "geometry"):
 
 _ANGLE_KEYS = {"angles_deg", "num_views", "start_angle_deg", "arc_deg"}
 _CIRCULAR_KEYS = {"beam", "detector_shape", "pixel_size", "detector_offset", *_ANGLE_KEYS}
-_SCAN_KEYS = {"parallel": _CIRCULAR_KEYS,
-              "cone": {*_CIRCULAR_KEYS, "source_to_origin", "source_to_detector", "source_offset"}}
+#: The keys of a circular scan's geometry table, by beam.
+SCAN_KEYS = {"parallel": _CIRCULAR_KEYS,
+             "cone": {*_CIRCULAR_KEYS, "source_to_origin", "source_to_detector", "source_offset"}}
 
 
 def _angles_from_dict(d: dict, where: str) -> tuple[float, ...]:

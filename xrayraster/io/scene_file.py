@@ -55,19 +55,28 @@ class SceneFile:
     realism: Realism = Realism()
 
 
-_OBJECT_KEYS = {"name", "mesh", "material", "label", "priority", "unit_scale", "translate", "rotate_deg"}
-_PRIMITIVE_KEYS = {"box": {"box"}, "sphere": {"sphere", "subdivisions"}, "cylinder": {"cylinder", "height", "sections"}}
+# The public key sets below are shared with the scan file's loader and its dotted keys
+# (xrayraster.pipeline.scan_file, xrayraster.pipeline.scan_keys).
+
+#: The keys of an ``[[objects]]`` entry.
+OBJECT_KEYS = {"name", "mesh", "material", "label", "priority", "unit_scale", "translate", "rotate_deg"}
+#: A mesh primitive's kind → the keys of its inline table.
+PRIMITIVE_KEYS = {"box": {"box"}, "sphere": {"sphere", "subdivisions"}, "cylinder": {"cylinder", "height", "sections"}}
 _MATERIAL_KINDS = ("element", "formula", "mass_fractions")
-_MATERIAL_KEYS = {*_MATERIAL_KINDS, "density"}
-_SOURCE_KINDS = {  # the key that picks the kind → every key of that kind
+#: The keys of a ``[materials.NAME]`` table (or an inline scintillator table).
+MATERIAL_KEYS = {*_MATERIAL_KINDS, "density"}
+#: The ``[source]`` table: the key that picks the kind → every key of that kind.
+SOURCE_KINDS = {
     "kvp": {"kvp", "anode", "anode_angle_deg", "filters", "mas", "bin_kev"},
     "monochromatic_kev": {"monochromatic_kev", "photons_per_mm2_at_1m"},
     "spectrum_file": {"spectrum_file"},
 }
-_SOURCE_REALISM_KEYS = {"focal_spot_mm", "focal_plane_mm"}  # any source kind
+#: The ``[source]`` keys of the scanner's imperfections, allowed with any source kind.
+SOURCE_REALISM_KEYS = {"focal_spot_mm", "focal_plane_mm"}
 _DETECTOR_REALISM_KEYS = {"flat_fields", "gain_variation"}
-_DETECTOR_KEYS = {"mode", "scintillator", "scintillator_mm", "blur_sigma_px", "psf", "electronic_noise", "dark",
-                  *_DETECTOR_REALISM_KEYS}
+#: The keys of the ``[detector]`` table.
+DETECTOR_KEYS = {"mode", "scintillator", "scintillator_mm", "blur_sigma_px", "psf", "electronic_noise", "dark",
+                 *_DETECTOR_REALISM_KEYS}
 _MAX_SUBDIVISIONS = 8  # 1.3 million triangles
 _MAX_SECTIONS = 10_000
 
@@ -100,25 +109,25 @@ def load_scene_file(source, *, where: str = "scene table", base_dir=None,
         raise ConfigError(f"{path}: missing [geometry] table")
     if not isinstance(data["geometry"], dict):
         raise ConfigError(f"{path}: geometry must be a table ([geometry]), got {data['geometry']!r}")
-    geometry = _geometry(data["geometry"], f"{path} [geometry]")
+    geometry = parse_geometry(data["geometry"], f"{path} [geometry]")
     if objects_of is not None:
         scene, materials = objects_of.scene, objects_of.materials
     else:
         scene, materials = _objects(data, base, path)
     spectrum = None
     if "source" in data:
-        spectrum = _source(fields.table(data["source"], "source", f"{path}"), base, f"{path} [source]")
+        spectrum = parse_source(fields.table(data["source"], "source", f"{path}"), base, f"{path} [source]")
     detector = None
     if "detector" in data:
-        detector = _detector(fields.table(data["detector"], "detector", f"{path}"), materials, f"{path} [detector]")
-    return SceneFile(path, geometry, scene, materials, spectrum, detector, _realism(data, geometry, path))
+        detector = parse_detector(fields.table(data["detector"], "detector", f"{path}"), materials, f"{path} [detector]")
+    return SceneFile(path, geometry, scene, materials, spectrum, detector, parse_realism(data, geometry, path))
 
 
 def _objects(data: dict, base: Path, path: Path) -> tuple[Scene, dict | None]:
     """The ``[[objects]]`` as a scene, and the materials they and the detector may name."""
     materials = None
     if "materials" in data:
-        materials = _materials(data["materials"], f"{path} [materials]")
+        materials = parse_materials(data["materials"], f"{path} [materials]")
     objects = data.get("objects", [])
     if not isinstance(objects, list):
         raise ConfigError(f"{path}: objects must be an array of tables ([[objects]]), got {objects!r}")
@@ -130,27 +139,29 @@ def _objects(data: dict, base: Path, path: Path) -> tuple[Scene, dict | None]:
         where = f"{path} [[objects]] #{k + 1}"
         if not isinstance(spec, dict):
             raise ConfigError(f"{where}: must be a table ([[objects]]), got {spec!r}")
-        _add_object(scene, spec, base, where, materials, library)
+        add_object(scene, spec, base, where, materials, library)
     if library and (materials is not None or all(isinstance(o.material, Material) for o in scene.objects)):
         materials = {**library, **(materials or {})}
     return scene, materials
 
 
-def _add_object(scene: Scene, spec: dict, base: Path, where: str, materials: dict | None = None,
-                library: dict | None = None) -> None:
+def add_object(scene: Scene, spec: dict, base: Path, where: str, materials: dict | None = None,
+               library: dict | None = None) -> None:
+    """Add one ``[[objects]]`` entry ``spec`` to ``scene``: its material looked up in ``materials``
+    first, then in the library (a library material used is recorded in ``library``, by its name)."""
     name = spec.get("name")
     if name is not None:
         if not isinstance(name, str) or not name:
             raise ConfigError(f"{where}: name must be a non-empty string, got {name!r}")
         where = f"{where} ({name})"
-    fields.only(spec, _OBJECT_KEYS, where)
+    fields.only(spec, OBJECT_KEYS, where)
     mesh, material = fields.required(spec, "mesh", where), fields.required(spec, "material", where)
     if isinstance(material, (list, dict)):
         raise ConfigError(f"{where}: material must be a name (a string), got {material!r}")
     if materials is not None and isinstance(material, str) and material in materials:
         material = materials[material]  # [materials] wins over the library
     elif isinstance(material, str) and library_key(material):
-        material = _library(material)
+        material = library_material(material)
         if library is not None:
             library[material.name] = material
     elif materials is not None:
@@ -175,7 +186,7 @@ def _add_object(scene: Scene, spec: dict, base: Path, where: str, materials: dic
         raise ConfigError(f"{where}: {what}: {exc}") from None
 
 
-def _library(name: str) -> Material:
+def library_material(name: str) -> Material:
     """The library material ``name`` stands for, called ``name`` (as the file writes it)."""
     return dataclasses.replace(Material.named(name), name=name)
 
@@ -183,7 +194,7 @@ def _library(name: str) -> Material:
 # ----------------------------------------------------------------------------- tables
 
 
-def _geometry(g, where: str):
+def parse_geometry(g, where: str):
     """The ``[geometry]`` table: the dict form of a cone or parallel scan (:mod:`xrayraster.core.geometry`)."""
     if isinstance(g, dict) and "vectors" in g:
         raise ConfigError(f"{where}: scene files take cone or parallel geometries; 'vectors' is for scan files")
@@ -200,12 +211,12 @@ def _mesh(spec, base: Path, where: str):
     import trimesh
 
     where = f"{where} mesh"
-    kinds = set(_PRIMITIVE_KEYS) & set(spec)
+    kinds = set(PRIMITIVE_KEYS) & set(spec)
     if len(kinds) != 1:
-        fields.only(spec, set().union(*_PRIMITIVE_KEYS.values()), where)
+        fields.only(spec, set().union(*PRIMITIVE_KEYS.values()), where)
         raise ConfigError(f"{where}: a mesh primitive needs exactly one of box, sphere, cylinder")
     kind = kinds.pop()
-    fields.only(spec, _PRIMITIVE_KEYS[kind], where)
+    fields.only(spec, PRIMITIVE_KEYS[kind], where)
     if kind == "box":
         extents = fields.vector(spec["box"], "box", where, 3, "[x, y, z] edge lengths in mm", positive=True)
         return trimesh.creation.box(extents)
@@ -232,7 +243,8 @@ def _placement(spec: dict, where: str) -> Transform | None:
     return Transform.translation(offset) @ t
 
 
-def _materials(specs, where: str) -> dict[str, Material]:
+def parse_materials(specs, where: str) -> dict[str, Material]:
+    """The ``[materials]`` table → {NAME: Material}; ``where`` names it (``"FILE [materials]"``)."""
     specs = fields.table(specs, "materials", where.rsplit(" ", 1)[0])
     return {name: _material(spec, name, f"{where[:-1]}.{name}]") for name, spec in specs.items()}
 
@@ -244,7 +256,7 @@ def _material(spec, name: str, where: str) -> Material:
             f"{where}: must be a table such as {{ element = \"Al\" }}, {{ formula = \"H2O\", density = 1.0 }} "
             f"or {{ mass_fractions = {{ Fe = 0.98, C = 0.02 }}, density = 7.85 }}, got {spec!r}"
         )
-    fields.only(spec, _MATERIAL_KEYS, where)
+    fields.only(spec, MATERIAL_KEYS, where)
     kinds = [k for k in _MATERIAL_KINDS if k in spec]
     if len(kinds) != 1:
         given = f"got {' and '.join(kinds)}" if kinds else "got none"
@@ -272,20 +284,21 @@ def _material(spec, name: str, where: str) -> Material:
         raise ConfigError(f"{where}: {exc}") from None
 
 
-def _source(src: dict, base: Path, where: str) -> Spectrum:
-    fields.only(src, set().union(*_SOURCE_KINDS.values(), _SOURCE_REALISM_KEYS), where)
-    kinds = [k for k in _SOURCE_KINDS if k in src]
+def parse_source(src: dict, base: Path, where: str) -> Spectrum:
+    """The ``[source]`` table → its Spectrum; a ``spectrum_file`` is relative to ``base``."""
+    fields.only(src, set().union(*SOURCE_KINDS.values(), SOURCE_REALISM_KEYS), where)
+    kinds = [k for k in SOURCE_KINDS if k in src]
     if len(kinds) != 1:
         given = f"got {' and '.join(kinds)}" if kinds else "got none"
         raise ConfigError(
             f"{where}: give exactly one source kind: kvp (an X-ray tube), monochromatic_kev, or spectrum_file ({given})"
         )
     kind = kinds[0]
-    stray = sorted(set(src) - _SOURCE_KINDS[kind] - _SOURCE_REALISM_KEYS)
+    stray = sorted(set(src) - SOURCE_KINDS[kind] - SOURCE_REALISM_KEYS)
     if stray:
         raise ConfigError(
             f"{where}: {', '.join(stray)} do(es) not apply to a {kind} source; "
-            f"allowed with {kind}: {', '.join(sorted(_SOURCE_KINDS[kind]))}"
+            f"allowed with {kind}: {', '.join(sorted(SOURCE_KINDS[kind]))}"
         )
     try:
         if kind == "kvp":
@@ -314,15 +327,16 @@ def _source(src: dict, base: Path, where: str) -> Spectrum:
         raise ConfigError(f"{where}: {exc}") from None
 
 
-def _detector(spec: dict, materials: dict | None, where: str) -> Detector:
-    fields.only(spec, _DETECTOR_KEYS, where)
+def parse_detector(spec: dict, materials: dict | None, where: str) -> Detector:
+    """The ``[detector]`` table → a Detector; a scintillator by name from ``materials`` or the library."""
+    fields.only(spec, DETECTOR_KEYS, where)
     mode = spec.get("mode", "integrating")
     if mode not in DETECTOR_MODES:
         raise ConfigError(f"{where}: mode must be 'integrating' or 'counting', got {mode!r}")
     scintillator = spec.get("scintillator")
     if isinstance(scintillator, str) and (materials is None or scintillator not in materials) \
             and library_key(scintillator):
-        scintillator = _library(scintillator)
+        scintillator = library_material(scintillator)
     elif isinstance(scintillator, str):
         if materials is None or scintillator not in materials:
             defined = ", ".join(sorted(materials)) if materials else "none"
@@ -367,7 +381,7 @@ def _psf(value, where: str) -> tuple:
     return rows
 
 
-def _realism(data: dict, geometry, path: Path) -> Realism:
+def parse_realism(data: dict, geometry, path: Path) -> Realism:
     """The scanner's imperfections (docs/realism.md) from ``[source]`` (``focal_spot_mm``,
     ``focal_plane_mm``) and ``[detector]`` (``flat_fields``, ``gain_variation``); all off by default."""
     source, detector = data.get("source", {}), data.get("detector", {})

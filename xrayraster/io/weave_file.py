@@ -36,7 +36,7 @@ from ..weave.materials import FibreBundle, Tracer, YarnMaterials
 from ..weave.sample import Sample
 from ..weave.size import Size, weave_estimate
 from ..weave.spec import UnitCell
-from .scene_file import _library, _materials, read_toml
+from .scene_file import library_material, parse_materials, read_toml
 
 __all__ = [
     "WeaveFile", "framing_geometry", "load_weave_file", "sample_grid", "weave_from_dict", "write_scan_file",
@@ -44,7 +44,8 @@ __all__ = [
 ]
 
 _SUBTABLES = ("sample", "distortion", "materials")
-_SAMPLE_KEYS = {"cells", "layers_of_cells", "points_per_section", "samples_per_mm", "seed"}
+#: The keys of the ``[weave.sample]`` table.
+SAMPLE_TABLE_KEYS = {"cells", "layers_of_cells", "points_per_section", "samples_per_mm", "seed"}
 _FAMILIES = ("matrix", "weft", "warp")
 
 #: The source the exported scene file gets: the tube of a laboratory micro-CT scan of a carbon
@@ -72,7 +73,7 @@ def load_weave_file(source) -> WeaveFile:
     fields.only(data, {"weave", "materials"}, where)
     if "weave" not in data:
         raise ConfigError(f"{where}: missing [weave] table (the unit cell; every key may be left at its default)")
-    materials = _materials(data["materials"], f"{where} [materials]") if "materials" in data else {}
+    materials = parse_materials(data["materials"], f"{where} [materials]") if "materials" in data else {}
     sample, yarn_materials = weave_from_dict(data["weave"], materials, f"{where} [weave]")
     weave_estimate(sample, tables=True).check(ConfigError, f"{where} ")
     return WeaveFile(path, sample, yarn_materials)
@@ -92,7 +93,7 @@ def weave_from_dict(d, materials: dict[str, Material], where: str = "[weave]", *
     sub = {name: fields.table(d.get(name, {}), f"weave.{name}", where) for name in _SUBTABLES}
     sample_where = f"{where[:-1]}.sample]"
     s = sub["sample"]
-    fields.only(s, _SAMPLE_KEYS, sample_where)
+    fields.only(s, SAMPLE_TABLE_KEYS, sample_where)
     kwargs = {}
     if "cells" in s:
         kwargs["cells"] = tuple(fields.vector(s["cells"], "cells", sample_where, 2, "[nx, ny]",
@@ -131,7 +132,7 @@ def _yarn_materials(d: dict, materials: dict[str, Material], where: str) -> Yarn
         if name in materials:
             return materials[name]
         if library_key(name):
-            return _library(name)
+            return library_material(name)
         raise ConfigError(f"{where}: {field}: material {name!r} is neither in [materials] "
                           f"({', '.join(sorted(materials)) or 'none defined'}) nor a library material "
                           f"({', '.join(Material.library_names())}); add a [materials.{name}] table or use one of those")

@@ -167,7 +167,7 @@ class PatchDataset:
         self.dataset = BuiltDataset.open(root)
         self.samples = self.dataset.indices(split)
         self.split = split
-        self.patch_size = _size(patch_size)
+        self.patch_size = patch_shape(patch_size)
         self.patches_per_sample = _positive("patches_per_sample", patches_per_sample)
         self.index_block = _positive("index_block", index_block)
         self.class_shares = _shares(class_shares, self.dataset.labels)
@@ -286,7 +286,8 @@ def _crop(array, start, size, dtype) -> np.ndarray:
     return data
 
 
-def _size(patch_size) -> tuple[int, int, int]:
+def patch_shape(patch_size) -> tuple[int, int, int]:
+    """``patch_size`` (one positive integer, or (z, y, x) of them) checked, as (z, y, x)."""
     try:
         size = tuple(patch_size)  # (z, y, x)
     except TypeError:  # one number for all three

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.errors import ConfigError
-from .patches import Percentiles, _size, intensity_bounds
+from .patches import Percentiles, intensity_bounds, patch_shape
 
 BLENDS = ("gaussian", "uniform")
 
@@ -35,7 +35,7 @@ def predict_volume(model, volume, patch_size=64, *, overlap: float = 0.5, normal
     volume = np.asarray(volume, dtype=np.float32)
     if volume.ndim != 3:
         raise ConfigError(f"volume must be 3-D (z, y, x), got shape {volume.shape}")
-    size = _size(patch_size)
+    size = patch_shape(patch_size)
     normalize = normalize or Percentiles()
     padded = np.pad(normalize.scaled(volume, intensity_bounds(normalize, volume, index_block)),
                     [(0, max(p - n, 0)) for p, n in zip(size, volume.shape)])

@@ -24,7 +24,8 @@ from ..scene.scene import Scene
 
 __all__ = ["Pose"]
 
-_KEYS = {"offset_mm", "tilt_deg"}
+#: The keys of the ``[pose]`` table.
+POSE_KEYS = {"offset_mm", "tilt_deg"}
 _AXES = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
 MAX_TILT_DEG = 180.0
 
@@ -42,7 +43,7 @@ class Pose:
     @classmethod
     def from_dict(cls, d: dict, where: str) -> "Pose":
         """The ``[pose]`` table, checked: three finite numbers each, tilts within ±180 degrees."""
-        fields.only(d, _KEYS, where)
+        fields.only(d, POSE_KEYS, where)
         pose = {}
         if "offset_mm" in d:
             pose["offset_mm"] = fields.vector(d["offset_mm"], "offset_mm", where, 3, "[x, y, z] in mm")

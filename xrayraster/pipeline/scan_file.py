@@ -32,7 +32,16 @@ from ..core.errors import ConfigError
 from ..core.geometry import ConeBeamGeometry, ParallelBeamGeometry
 from ..core.transform import Transform
 from ..core.volume import VolumeGeometry
-from ..io.scene_file import _OBJECT_KEYS, _add_object, _detector, _geometry, _materials, _realism, _source, read_toml
+from ..io.scene_file import (
+    OBJECT_KEYS,
+    add_object,
+    parse_detector,
+    parse_geometry,
+    parse_materials,
+    parse_realism,
+    parse_source,
+    read_toml,
+)
 from ..io.weave_file import WeaveFile, framing_geometry, sample_grid, weave_from_dict
 from ..physics.detector import Detector
 from ..physics.realism import Realism
@@ -181,11 +190,11 @@ def load_scan_file(source, *, where: str = "scan table", base_dir=None) -> ScanF
         raise ConfigError(f"{path}: missing [source] table (the X-ray tube, e.g. kvp = 40); a scan makes radiographs")
     options = ScanOptions.from_dict(fields.table(data.get("scan", {}), "scan", f"{path}"), f"{path} [scan]")
     volume = VolumeGeometry.from_dict(data["volume"], f"{path} [volume]") if "volume" in data else None
-    materials = _materials(data["materials"], f"{path} [materials]") if "materials" in data else None
+    materials = parse_materials(data["materials"], f"{path} [materials]") if "materials" in data else None
     pose = Pose.from_dict(fields.table(data["pose"], "pose", f"{path}"), f"{path} [pose]") if "pose" in data else Pose()
     geometry = None
     if "geometry" in data:
-        geometry = _geometry(fields.table(data["geometry"], "geometry", f"{path}"), f"{path} [geometry]")
+        geometry = parse_geometry(fields.table(data["geometry"], "geometry", f"{path}"), f"{path} [geometry]")
     scene = weave = None
     if has_weave:
         weave = WeaveFile(path, *weave_from_dict(data["weave"], materials or {}, f"{path} [weave]",
@@ -206,10 +215,10 @@ def load_scan_file(source, *, where: str = "scan table", base_dir=None) -> ScanF
     mount = None
     if "mount" in data:
         mount, materials = _mount(data["mount"], path, base, materials, scene)
-    spectrum = _source(fields.table(data["source"], "source", f"{path}"), base, f"{path} [source]")
+    spectrum = parse_source(fields.table(data["source"], "source", f"{path}"), base, f"{path} [source]")
     detector = None
     if "detector" in data:
-        detector = _detector(fields.table(data["detector"], "detector", f"{path}"), materials, f"{path} [detector]")
+        detector = parse_detector(fields.table(data["detector"], "detector", f"{path}"), materials, f"{path} [detector]")
     if volume is None:
         centre = (box[0] + box[1]) / 2
         volume = dataclasses.replace(sample_grid(box, geometry), offset=tuple(centre[::-1].tolist()))
@@ -219,7 +228,7 @@ def load_scan_file(source, *, where: str = "scan table", base_dir=None) -> ScanF
                  for k in ("points_per_section", "samples_per_mm")}
         weave, resolution = mesh_resolution_for(weave, volume, options.mesh_tolerance_voxels, given)
     return ScanFile(path, scene, weave, np.asarray(box, dtype=np.float64), geometry, volume, spectrum, detector,
-                    options, resolution, _realism(data, geometry, path), mount, pose)
+                    options, resolution, parse_realism(data, geometry, path), mount, pose)
 
 
 def mesh_resolution_for(weave: WeaveFile, volume: VolumeGeometry, tolerance_voxels: float,
@@ -249,7 +258,7 @@ def _objects(objects, path: Path | str, base: Path, materials: dict | None) -> t
     library: dict[str, Material] = {}
     for k, spec in enumerate(objects):
         where = f"{path} [[objects]] #{k + 1}"
-        _add_object(scene, fields.table(spec, "objects", where), base, where, materials or {}, library)
+        add_object(scene, fields.table(spec, "objects", where), base, where, materials or {}, library)
     return scene, {**library, **(materials or {})}
 
 
@@ -269,10 +278,10 @@ def _mount(mounts, path: Path | str, base: Path, materials: dict | None, sample:
                          ("priority", "the sample owns any space it shares with a mount")):
             if key in spec:
                 raise ConfigError(f"{where}: {key} does not apply to a mount: {why}; remove it")
-        fields.only(spec, _OBJECT_KEYS - {"label", "priority"}, where)
+        fields.only(spec, OBJECT_KEYS - {"label", "priority"}, where)
         spec = {"name": f"mount{k + 1}", **spec}
         if spec["name"] in taken:
             raise ConfigError(f"{where}: name {spec['name']!r} is taken by an [[objects]] entry; give the mount "
                               "another name")
-        _add_object(scene, spec, base, where, materials or {}, library)
+        add_object(scene, spec, base, where, materials or {}, library)
     return scene, {**library, **(materials or {})}

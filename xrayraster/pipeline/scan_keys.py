@@ -14,20 +14,20 @@ import dataclasses
 from pathlib import Path
 
 from ..core.errors import ConfigError
-from ..core.geometry import _SCAN_KEYS
+from ..core.geometry import SCAN_KEYS
 from ..io.scene_file import (
-    _DETECTOR_KEYS,
-    _MATERIAL_KEYS,
-    _OBJECT_KEYS,
-    _PRIMITIVE_KEYS,
-    _SOURCE_KINDS,
-    _SOURCE_REALISM_KEYS,
+    DETECTOR_KEYS,
+    MATERIAL_KEYS,
+    OBJECT_KEYS,
+    PRIMITIVE_KEYS,
+    SOURCE_KINDS,
+    SOURCE_REALISM_KEYS,
 )
-from ..io.weave_file import _SAMPLE_KEYS
+from ..io.weave_file import SAMPLE_TABLE_KEYS
 from ..core.volume import VolumeGeometry
 from ..weave.distort import Distortion
 from ..weave.spec import Section, UnitCell
-from .pose import _KEYS as _POSE_KEYS
+from .pose import POSE_KEYS
 from .scan_file import TABLES, ScanOptions
 
 __all__ = ["absolute_paths", "check_key", "set_key"]
@@ -41,22 +41,22 @@ def _names(*groups) -> dict:
     return dict.fromkeys(set().union(*groups))
 
 
-_MATERIAL = {**_names(_MATERIAL_KEYS), "mass_fractions": {ANY: None}}
+_MATERIAL = {**_names(MATERIAL_KEYS), "mass_fractions": {ANY: None}}
 _SECTION = _names(f.name for f in dataclasses.fields(Section))
 _BUNDLE = {"fibre": None, "fibre_fraction": None}
-_OBJECT = {**_names(_OBJECT_KEYS), "mesh": _names(*_PRIMITIVE_KEYS.values())}
+_OBJECT = {**_names(OBJECT_KEYS), "mesh": _names(*PRIMITIVE_KEYS.values())}
 KEYS = {
-    "geometry": _names({"vectors"}, *_SCAN_KEYS.values()),
+    "geometry": _names({"vectors"}, *SCAN_KEYS.values()),
     "weave": {**_names(f.name for f in dataclasses.fields(UnitCell)), "weft_section": _SECTION,
-              "warp_section": _SECTION, "sample": _names(_SAMPLE_KEYS),
+              "warp_section": _SECTION, "sample": _names(SAMPLE_TABLE_KEYS),
               "distortion": _names(f.name for f in dataclasses.fields(Distortion)),
               "materials": {"matrix": None, "weft": _BUNDLE, "warp": _BUNDLE, "tracers": None}},
     "materials": {ANY: _MATERIAL},
-    "source": {**_names(_SOURCE_REALISM_KEYS, *_SOURCE_KINDS.values()), "filters": {ANY: None}},
-    "detector": {**_names(_DETECTOR_KEYS), "scintillator": _MATERIAL},
+    "source": {**_names(SOURCE_REALISM_KEYS, *SOURCE_KINDS.values()), "filters": {ANY: None}},
+    "detector": {**_names(DETECTOR_KEYS), "scintillator": _MATERIAL},
     "volume": _names(f.name for f in dataclasses.fields(VolumeGeometry)),
     "scan": _names(f.name for f in dataclasses.fields(ScanOptions)),
-    "pose": _names(_POSE_KEYS),
+    "pose": _names(POSE_KEYS),
     "objects": {INDEX: _OBJECT},
     "mount": {INDEX: {k: v for k, v in _OBJECT.items() if k not in ("label", "priority")}},
 }

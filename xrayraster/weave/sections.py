@@ -58,7 +58,7 @@ def ellipse_area(width: float, height: float) -> float:
     return math.pi * width * height / 4.0
 
 
-def _lens_arc(width: float, height: float) -> tuple[float, float]:
+def lens_arc(width: float, height: float) -> tuple[float, float]:
     """Radius and half-angle of each of the lens's two arcs (a = half-width, h = half-height)."""
     a, h = width / 2, height / 2
     radius = (a * a + h * h) / (2 * h)
@@ -76,7 +76,7 @@ def lenticular(width: float, height: float, k: int = 32) -> np.ndarray:
         raise WeaveError(f"lenticular: height ({height} mm) may not exceed width ({width} mm); "
                          "a lens taller than wide is not two arcs meeting at the sides")
     k = _check_k(k, minimum=4, multiple=2)
-    radius, alpha = _lens_arc(width, height)
+    radius, alpha = lens_arc(width, height)
     h = height / 2
     theta = np.pi / 2 - alpha + 2 * alpha * np.arange(k // 2) / (k // 2)
     upper = np.column_stack([radius * np.cos(theta), h - radius + radius * np.sin(theta)])
@@ -85,7 +85,7 @@ def lenticular(width: float, height: float, k: int = 32) -> np.ndarray:
 
 def lenticular_area(width: float, height: float) -> float:
     """Exact area of the lens, mm²: two circular segments, each R²·α − a·(R − h)."""
-    radius, alpha = _lens_arc(width, height)
+    radius, alpha = lens_arc(width, height)
     return 2.0 * (radius * radius * alpha - (width / 2) * (radius - height / 2))
 
 
@@ -114,7 +114,8 @@ def power_ellipse_area(width: float, height: float, exponent: float) -> float:
     return width * height * math.gamma(1 + 1 / n) ** 2 / math.gamma(1 + 2 / n)
 
 
-def _corner_radius(width: float, height: float, corner_fraction: float) -> float:
+def corner_radius(width: float, height: float, corner_fraction: float) -> float:
+    """The rounded rectangle's corner radius, mm: ``corner_fraction`` of half the smaller side."""
     f = float(corner_fraction)
     if not (math.isfinite(f) and 0 < f <= 1):
         raise WeaveError(f"rounded_rectangle: corner_fraction must be in (0, 1], got {corner_fraction!r} "
@@ -131,7 +132,7 @@ def rounded_rectangle(width: float, height: float, corner_fraction: float, k: in
     straight sides are single chords (they are exact).
     """
     width, height = _check_size("width", width), _check_size("height", height)
-    r = _corner_radius(width, height, corner_fraction)
+    r = corner_radius(width, height, corner_fraction)
     q = _check_k(k, minimum=4, multiple=4) // 4
     cx, cy = width / 2 - r, height / 2 - r
     step = (np.pi / 2) / q
@@ -144,5 +145,5 @@ def rounded_rectangle(width: float, height: float, corner_fraction: float, k: in
 
 def rounded_rectangle_area(width: float, height: float, corner_fraction: float) -> float:
     """Exact area of the smooth rounded rectangle, mm²: width·height − (4 − π)·r²."""
-    r = _corner_radius(width, height, corner_fraction)
+    r = corner_radius(width, height, corner_fraction)
     return width * height - (4 - math.pi) * r * r

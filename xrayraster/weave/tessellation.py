@@ -43,7 +43,7 @@ from ..core.errors import WeaveError
 from ..core.validate import show
 from .binders import binder_curvature_along, smallest_bend_radius_mm
 from .sample import Sample, section_outline
-from .sections import _corner_radius, _lens_arc
+from .sections import corner_radius, lens_arc
 from .spec import Section, UnitCell
 from .sweep import bend_sagitta_mm
 
@@ -81,11 +81,11 @@ def _support(section: Section, width: float, height: float):
     if section.shape == "ellipse":
         return lambda n: np.hypot(a * n[:, 0], b * n[:, 1])
     if section.shape == "lenticular":
-        radius, _ = _lens_arc(width, height)
+        radius, _ = lens_arc(width, height)
         # valid for the normals of the arcs, which every edge's normal is (the corners are vertices)
         return lambda n: radius - (radius - b) * np.abs(n[:, 1])
     if section.shape == "rounded_rectangle":
-        r = _corner_radius(width, height, section.corner)
+        r = corner_radius(width, height, section.corner)
         return lambda n: (a - r) * np.abs(n[:, 0]) + (b - r) * np.abs(n[:, 1]) + r
     exponent = section.exponent
     if exponent < 1:

@@ -1,4 +1,5 @@
-"""TexGen (``pytexgen`` on PyPI, GPL-2.0-or-later) as a benchmark peer for ``xrayraster.weave``.
+"""TexGen (``pytexgen`` on PyPI, GPL-2.0-or-later) as an independent peer of ``xrayraster.weave``:
+the weave benchmark (scripts/bench_weave.py) compares with it, tests/test_texgen_peer.py checks it.
 
 TexGen is the textile modeller users of layer-to-layer weaves have; this module builds the same
 layer-to-layer angle interlock as ``xrayraster.weave.Sample(cell, cells=(nx, ny))`` with TexGen's
