@@ -30,6 +30,7 @@ import xrayraster as xr
 from xrayraster import cli
 from xrayraster.core.errors import ConfigError
 from xrayraster.dataset import build as dataset_module
+from xrayraster.dataset import scheduler as scheduler_module
 from xrayraster.dataset import load_dataset_file
 from xrayraster.pipeline.scan import ScanResult
 
@@ -182,7 +183,7 @@ def test_a_server_that_speaks_another_protocol_is_no_scheduler(server, tmp_path,
                          ids=["not a url", "http", "no port", "closed port"])
 def test_an_address_where_no_scheduler_listens_is_refused(address, tmp_path, capsys, monkeypatch):
     pytest.importorskip("distributed")
-    monkeypatch.setattr(dataset_module, "SCHEDULER_TIMEOUT_S", 1.0, raising=False)  # a closed port: Dask retries
+    monkeypatch.setattr(scheduler_module, "SCHEDULER_TIMEOUT_S", 1.0)  # a closed port: Dask retries
     address = address.format(port=closed_port())
     start = time.monotonic()
     err = refused(capsys, "build", str(dataset_file(tmp_path)), "-o", str(tmp_path / "out"), "--scheduler", address,
@@ -194,8 +195,8 @@ def test_an_address_where_no_scheduler_listens_is_refused(address, tmp_path, cap
 TIMED = """
 import sys
 from xrayraster import cli
-from xrayraster.dataset import build as dataset
-dataset.SCHEDULER_TIMEOUT_S = 2.0
+from xrayraster.dataset import scheduler
+scheduler.SCHEDULER_TIMEOUT_S = 2.0
 sys.exit(cli.main(sys.argv[1:]))
 """
 

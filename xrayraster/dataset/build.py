@@ -45,34 +45,30 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..core.errors import ConfigError, XrayrasterError, XrayrasterWarning
-from ..core.files import (atomic_write_text, directory_target, probe_writable, remove_entry,
-                          remove_stale_temporaries_in)
-from ..core.ownership import directory_entries, read_record
+from ..core.files import atomic_write_text
 from ..core.pictures import write_gallery
-from ..core.provenance import package_version
 from ..pipeline.scan import scan
 from ..pipeline.woven import weave
-from .dataset_file import DatasetFile, differences, draw, fingerprint, identity, load_dataset_file
+from . import scheduler as scheduler_module  # its timeout read at each use: tests shorten it
+from .dataset_file import DatasetFile, draw, load_dataset_file
+from .directory import check_sample_folders, checked_directory, record_build, sweep
 from .distributions import Fixed
 from .layouts import LAYOUTS
-from .names import GENERATOR, RECORD_NAME
+from .names import FAILED_NAME, GALLERY_NAME
 from .plan import check_sample, sample_bytes
+from .scheduler import check_scheduler, require_distributed
 
 __all__ = ["BuildReport", "build", "build_sample"]
 
 log = logging.getLogger(__name__)
 
-FAILED_NAME, GALLERY_NAME = "failed.csv", "gallery.png"
 GALLERY_SAMPLES = 6  # the first finished samples the gallery shows
 # Keys of a scan's metadata that differ between two runs of the same sample, kept out of its files:
 # wall times, the memory peak, and the devices (an OpenCL CPU device's description counts the
 # compute units a worker was given).
 VOLATILE = ("seconds", "peak_rss_mib", "devices")
 RETRIES = 1
-#: Seconds to reach a Dask scheduler and hear it answer, as long as Dask waits on a closed port.
-SCHEDULER_TIMEOUT_S = 30.0
-_SCHEDULER_FIX = ("start one with `dask scheduler` and give the address it prints (such as tcp://10.0.0.5:8786), "
-                  "or build on this machine with --workers N")
+
 
 
 @dataclass(frozen=True)
@@ -94,20 +90,20 @@ def build(config, directory, *, workers: int = 1, dask: bool = False, scheduler:
     bar with ETA and samples per hour on stderr. Returns a :class:`BuildReport`."""
     dataset = config if isinstance(config, DatasetFile) else load_dataset_file(config)
     workers = _checked_workers(workers)
-    root, replaced = _checked_directory(dataset, directory, force)
+    root, replaced = checked_directory(dataset, directory, force)
     layout = LAYOUTS[dataset.layout]
     finished = layout.finished(root, dataset.name) if root.is_dir() and replaced is None else {}
     todo = [i for i in range(dataset.count) if i not in finished]
-    _check_sample_folders(root, layout, todo, dataset.name)
+    check_sample_folders(root, layout, todo, dataset.name)
     _check_first_sample(dataset, root, todo)
     if scheduler is not None:
-        check_scheduler(scheduler, SCHEDULER_TIMEOUT_S)
+        check_scheduler(scheduler, scheduler_module.SCHEDULER_TIMEOUT_S)
     else:
         workers = _useful_workers(workers, len(todo))
     # Everything has passed: from here on the build writes.
-    _record(root, dataset, replaced)
+    record_build(root, dataset, replaced)
     dataset = _as_first_built(dataset, root, layout, finished)
-    _sweep(root)  # what a killed build left: temporaries, and the files of samples it did not finish
+    sweep(root)  # what a killed build left: temporaries, and the files of samples it did not finish
     for path in layout.remove_unfinished(root, dataset.name):
         log.info("removed %s: its sample was not finished", path)
     start = time.perf_counter()
@@ -126,7 +122,7 @@ def build(config, directory, *, workers: int = 1, dask: bool = False, scheduler:
         interrupted = exc
         raise
     finally:
-        _sweep(root)  # the pool's, when it was stopped
+        sweep(root)  # the pool's, when it was stopped
         records = layout.finished(root, dataset.name)
         layout.write_index(root, records, name=dataset.name, labels=_labels(records))
         _write_failed(root, dataset, failed)
@@ -187,67 +183,7 @@ def _steady(metadata: dict) -> dict:
     return {k: v for k, v in metadata.items() if k not in VOLATILE}
 
 
-# -- the directory -----------------------------------------------------------------------------
-
-
-def _sweep(root: Path) -> None:
-    """Remove the stale temporaries (their writers gone) in ``root`` and its visible folders: a
-    layout writes its samples' temporaries there (``samples/.00007.…``, ``imagesTr/.…``), never
-    deeper, as a sample's own folder appears whole."""
-    for folder in [root, *(p for p in root.iterdir() if p.is_dir() and not p.name.startswith("."))]:
-        remove_stale_temporaries_in(folder)
-
-
-def _checked_directory(dataset: DatasetFile, directory, force: bool) -> tuple[Path, dict | None]:
-    """The dataset directory (links resolved) and, when this run replaces the earlier build there
-    (``force``, and a changed dataset file), that build's record; refused otherwise as the module
-    docstring says. Nothing is written."""
-    path = Path(directory)
-    root = directory_target(path, GENERATOR)
-    if not (root.is_dir() and any(root.iterdir())):
-        _check_writable(root, path)
-        return root, None
-    earlier = read_record(root / RECORD_NAME, GENERATOR)
-    if earlier is None:
-        raise ConfigError(f"{path} holds files that {GENERATOR} did not write (no {RECORD_NAME}); they are never "
-                          "removed: choose another directory")
-    changed = differences(earlier["identity"], dataset) if earlier["fingerprint"] != fingerprint(dataset) else []
-    if earlier["count"] > dataset.count:
-        changed.append(f"count: {earlier['count']} -> {dataset.count} (a build only grows)")
-    if changed and not force:
-        raise ConfigError(f"{path} holds a build of another dataset file ({'; '.join(changed)}); rerun with the "
-                          "same file (count may grow), choose another directory, or pass --force to remove this "
-                          "build's samples and start again")
-    _check_writable(root, path)
-    return root, earlier if changed else None
-
-
-def _check_writable(root: Path, path: Path) -> None:
-    """Refuse (ConfigError naming ``path``) an existing build directory, or a folder in it the build
-    writes into (samples/, imagesTr/, ...), that cannot be written: immutable, read-only, another
-    user's. Found now, not sample by sample."""
-    if root.is_dir():
-        for folder in _folders(root):
-            probe_writable(folder, path)
-
-
-def _record(root: Path, dataset: DatasetFile, replaced: dict | None) -> None:
-    """Remove the build ``replaced`` names, if any (its index first, so that no manifest lists a
-    sample that is gone), then record this one's dataset file in ``build.json``."""
-    if replaced is not None:
-        earlier = LAYOUTS[replaced["identity"]["layout"]]
-        for name in [*earlier.index_names(), GALLERY_NAME, FAILED_NAME]:
-            (root / name).unlink(missing_ok=True)
-        _remove_samples(root, replaced["identity"])
-    root.mkdir(parents=True, exist_ok=True)
-    record = {"generator": GENERATOR, "version": package_version(), "fingerprint": fingerprint(dataset),
-              "count": dataset.count, "identity": identity(dataset)}
-    atomic_write_text(root / RECORD_NAME, json.dumps(record, indent=2, sort_keys=True) + "\n")
-
-
-def _folders(root: Path) -> list[Path]:
-    """``root`` and its visible folders: where a layout writes its samples, never deeper."""
-    return [root, *(p for p in root.iterdir() if p.is_dir() and not p.name.startswith("."))]
+# -- the samples' checks and what a build leaves ------------------------------------------------
 
 
 def _as_first_built(dataset: DatasetFile, root: Path, layout, finished: dict) -> DatasetFile:
@@ -265,40 +201,6 @@ def _as_first_built(dataset: DatasetFile, root: Path, layout, finished: dict) ->
     if number != str(index) or where in ("", dataset.where):
         return dataset
     return dataclasses.replace(dataset, path=None if where == "dataset table" else Path(where))
-
-
-def _remove_samples(root: Path, earlier: dict) -> None:
-    """Remove the samples of an earlier build (``earlier``: its identity): the files its layout
-    names, those its samples' folders record (kept projections, meshes) and the folders they leave
-    empty, nothing else (a person's files stay)."""
-    layout = LAYOUTS[earlier["layout"]]
-    folders = set()
-    for index, record in layout.finished(root, earlier["name"]).items():
-        for folder, marker in layout.sample_folders(index, earlier["name"]):
-            if (root / folder).is_dir():
-                for entry in directory_entries(root / folder, marker, GENERATOR)[0]:  # the recorded ones
-                    remove_entry(root / folder / entry)
-            folders.add(root / folder)
-        for relative in layout.sample_paths(index, record["split"], earlier["name"]):
-            remove_entry(root / relative)
-            folders.update((root / relative).parents)
-    for folder in sorted(folders - set(root.parents) - {root}, key=lambda f: -len(f.parts)):  # deepest first
-        if folder.is_dir() and not any(folder.iterdir()):
-            folder.rmdir()
-
-
-def _check_sample_folders(root: Path, layout, todo: list[int], name: str) -> None:
-    """Refuse a folder a sample left writes whole (``samples/00003``) that holds files the build did
-    not write: they would fail that sample, and are never removed."""
-    for index in todo:
-        for folder, marker in layout.sample_folders(index, name):
-            if (root / folder).is_dir():
-                foreign = directory_entries(root / folder, marker, GENERATOR)[1]
-                if foreign:
-                    shown = ", ".join(foreign[:3]) + (f" and {len(foreign) - 3} more" if len(foreign) > 3 else "")
-                    raise ConfigError(f"{root / folder} holds {shown}, which {GENERATOR} did not write, where sample "
-                                      f"{index} goes; they are never removed: move them out of that folder, or "
-                                      "choose another directory")
 
 
 def _check_first_sample(dataset: DatasetFile, root: Path, todo: list[int]) -> None:
@@ -464,73 +366,14 @@ def _sigint_blocked():
         signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
-def _distributed():
-    """The ``distributed`` package, or ConfigError saying how to install it."""
-    try:
-        import distributed
-    except ImportError:
-        raise ConfigError("building on Dask needs the dask extra: pip install \"xrayraster[dask]\"") from None
-    return distributed
-
-
-def check_scheduler(address, timeout: float = SCHEDULER_TIMEOUT_S) -> None:
-    """Refuse, within about ``timeout`` seconds, an ``address`` where no Dask scheduler answers:
-    not an address, nothing listening, a server that says nothing (Dask would wait for ever) or
-    speaks another protocol (SSH, HTTP), a Dask worker. ConfigError, one line naming the address."""
-    _distributed()
-    import asyncio
-    from concurrent.futures import ThreadPoolExecutor
-
-    from distributed.comm import connect
-    from distributed.comm.addressing import parse_address, parse_host_port
-    from distributed.security import Security
-
-    where = f"--scheduler {address!r}"
-    try:
-        if not isinstance(address, str):
-            raise ValueError(f"an address is a string, got {type(address).__name__}")
-        scheme, location = parse_address(address)
-        if scheme in ("tcp", "tls"):
-            parse_host_port(location)
-    except ValueError as exc:
-        raise ConfigError(f"{where} is not a Dask scheduler's address ({exc}); {_SCHEDULER_FIX}") from None
-
-    async def identity():
-        comm = await connect(address, timeout=timeout, **Security().get_connection_args("client"))
-        try:
-            await comm.write({"op": "identity", "reply": True})
-            return await comm.read()
-        finally:
-            comm.abort()
-
-    def ask():  # bounded as a whole: Dask's own timeout covers connecting, not a server that never answers
-        return asyncio.run(asyncio.wait_for(identity(), timeout))
-
-    try:
-        with ThreadPoolExecutor(1) as thread:  # its own event loop, whatever loop the caller runs (Jupyter)
-            reply = thread.submit(ask).result()
-    except TimeoutError:
-        raise ConfigError(f"{where}: no Dask scheduler answered within {timeout:g} s; {_SCHEDULER_FIX}") from None
-    except OSError as exc:  # nothing listening, the connection closed
-        raise ConfigError(f"{where}: no Dask scheduler there ({' '.join(str(exc).split())}); "
-                          f"{_SCHEDULER_FIX}") from None
-    except Exception:  # what another protocol's bytes make of Dask's framing: absurd sizes, bad msgpack
-        raise ConfigError(f"{where}: the server there does not speak Dask's protocol (an SSH or web server?); "
-                          f"{_SCHEDULER_FIX}") from None
-    kind = reply.get("type") if isinstance(reply, dict) else None
-    if kind != "Scheduler":
-        raise ConfigError(f"{where}: the server there is {'a Dask ' + str(kind) if kind else 'not Dask'}, not a "
-                          f"scheduler; {_SCHEDULER_FIX}")
-
-
 def _on_dask(dataset, root, todo, workers, scheduler):
-    _distributed()
+    require_distributed()
     from distributed import Client, LocalCluster, as_completed
     # A LocalCluster's workers share this machine; a cluster's own workers know their machines, and
     # their threads are set where they are started (docs/dataset.md).
     threads = None if scheduler else max(1, (os.cpu_count() or 1) // workers)
     cluster = None if scheduler else LocalCluster(n_workers=workers, threads_per_worker=1, processes=True)
-    client = Client(scheduler or cluster, timeout=SCHEDULER_TIMEOUT_S)
+    client = Client(scheduler or cluster, timeout=scheduler_module.SCHEDULER_TIMEOUT_S)
     try:
         futures = [client.submit(_attempt, dataset, str(root), index, threads, key=f"xrayraster-sample-{index}",
                                  pure=False) for index in todo]
