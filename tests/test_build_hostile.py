@@ -86,7 +86,7 @@ def fake_scan(loaded, **_):
     volume = xr.Volume(rng.random(grid.shape, dtype=np.float32), grid)
     labels = xr.LabelVolume(rng.integers(0, 4, grid.shape, dtype=np.uint8), grid)
     metadata = {"generator": "xrayraster scan", "scan_file": str(loaded.path), "seed": loaded.options.seed,
-                "labels": {"0": "air", "1": "matrix", "2": "weft", "3": "warp"}, "seconds": {"total": 0.1}}
+                "labels": {"0": "background", "1": "matrix", "2": "weft", "3": "warp"}, "seconds": {"total": 0.1}}
     return ScanResult(volume, labels, metadata)
 
 

@@ -2,7 +2,7 @@
 work (suffix, outputs that are inputs, unwritable directories), stale temporaries of killed writers
 removed without touching live ones, Ctrl-C (exit 130), exit codes, plain numbers in messages,
 scan-geometry conflicts, under-sampled reconstructions, float32-underflowing transmission,
-``--scan-file`` and its deprecated spellings."""
+``--grid`` and its deprecated spellings."""
 
 from __future__ import annotations
 
@@ -62,7 +62,7 @@ def _projections(folder: Path, geometry=PROJ_GEOMETRY, name="proj.tif") -> Path:
     return path
 
 
-def _scan_file(folder: Path, name="scan.json", **content) -> Path:
+def _grid_file(folder: Path, name="grid.json", **content) -> Path:
     path = folder / name
     path.write_text(json.dumps(content or {"volume": SCAN_VOLUME}))
     return path
@@ -98,52 +98,52 @@ def _case_no_suffix(tmp):
 
 
 def _case_output_is_projections(tmp):
-    proj, scan = _projections(tmp), _scan_file(tmp)
-    return (["reconstruct", str(proj), "--scan-file", str(scan), "-o", str(proj)], [proj, scan],
+    proj, scan = _projections(tmp), _grid_file(tmp)
+    return (["reconstruct", str(proj), "--grid", str(scan), "-o", str(proj)], [proj, scan],
             rf"-o would overwrite the input {proj}")
 
 
 def _case_output_resolves_to_projections(tmp):
-    proj, scan = _projections(tmp), _scan_file(tmp)
+    proj, scan = _projections(tmp), _grid_file(tmp)
     (tmp / "sub").mkdir()
     out = tmp / "sub" / ".." / "proj.tif"
-    return (["reconstruct", str(proj), "--scan-file", str(scan), "-o", str(out)], [proj, scan],
+    return (["reconstruct", str(proj), "--grid", str(scan), "-o", str(out)], [proj, scan],
             rf"-o would overwrite the input {proj}")
 
 
 def _case_output_links_to_projections(tmp):
-    proj, scan = _projections(tmp), _scan_file(tmp)
+    proj, scan = _projections(tmp), _grid_file(tmp)
     (tmp / "link.tif").symlink_to(proj)
-    return (["reconstruct", str(proj), "--scan-file", str(scan), "-o", str(tmp / "link.tif")], [proj, scan],
+    return (["reconstruct", str(proj), "--grid", str(scan), "-o", str(tmp / "link.tif")], [proj, scan],
             r"would overwrite the input")
 
 
 def _case_output_hardlinks_to_projections(tmp):
-    proj, scan = _projections(tmp), _scan_file(tmp)
+    proj, scan = _projections(tmp), _grid_file(tmp)
     os.link(proj, tmp / "hard.tif")  # samefile only: another name, another real path
-    return (["reconstruct", str(tmp / "hard.tif"), "--scan-file", str(scan), "-o", str(proj)],
+    return (["reconstruct", str(tmp / "hard.tif"), "--grid", str(scan), "-o", str(proj)],
             [proj, scan], r"would overwrite the input .*hard\.tif")
 
 
-def _case_quicklook_is_the_scan_file(tmp):
-    proj, scan = _projections(tmp), _scan_file(tmp, name="vol.png")
-    return (["reconstruct", str(proj), "--scan-file", str(scan), "-o", str(tmp / "vol.tif")], [proj, scan],
+def _case_quicklook_is_the_grid_file(tmp):
+    proj, scan = _projections(tmp), _grid_file(tmp, name="vol.png")
+    return (["reconstruct", str(proj), "--grid", str(scan), "-o", str(tmp / "vol.tif")], [proj, scan],
             rf"the output {scan} \(beside -o .*vol\.tif\) would overwrite the input {scan}")
 
 
-def _case_fractions_is_the_scan_file(tmp):
+def _case_fractions_is_the_grid_file(tmp):
     scene = tmp / "scene.toml"
     scene.write_text(TINY_SCENE)
-    scan = _scan_file(tmp, name="lab_fractions.tif")
-    return (["voxelize", str(scene), "--scan-file", str(scan), "-o", str(tmp / "lab.tif"), "--fractions", "2"],
+    scan = _grid_file(tmp, name="lab_fractions.tif")
+    return (["voxelize", str(scene), "--grid", str(scan), "-o", str(tmp / "lab.tif"), "--fractions", "2"],
             [scene, scan], rf"the output {scan} .* would overwrite the input {scan}")
 
 
 def _case_voxelize_output_is_the_scene(tmp):
     scene = tmp / "scene.tif"  # a TOML scene file with an unlucky name
     scene.write_text(TINY_SCENE)
-    scan = _scan_file(tmp)
-    return (["voxelize", str(scene), "--scan-file", str(scan), "-o", str(scene)], [scene, scan],
+    scan = _grid_file(tmp)
+    return (["voxelize", str(scene), "--grid", str(scan), "-o", str(scene)], [scene, scan],
             rf"-o would overwrite the input {scene}")
 
 
@@ -181,8 +181,8 @@ def _case_output_is_a_directory(tmp):
 
 REFUSED = {f.__name__[len("_case_"):]: f for f in (
     _case_png_output, _case_no_suffix, _case_output_is_projections, _case_output_resolves_to_projections,
-    _case_output_links_to_projections, _case_output_hardlinks_to_projections, _case_quicklook_is_the_scan_file,
-    _case_fractions_is_the_scan_file, _case_voxelize_output_is_the_scene, _case_parent_is_a_file, _case_under_proc,
+    _case_output_links_to_projections, _case_output_hardlinks_to_projections, _case_quicklook_is_the_grid_file,
+    _case_fractions_is_the_grid_file, _case_voxelize_output_is_the_scene, _case_parent_is_a_file, _case_under_proc,
     _case_under_sys, _case_output_is_a_directory)}
 
 
@@ -372,32 +372,32 @@ def test_messages_show_plain_numbers():
 def test_conflicting_scan_geometries_are_refused_unless_one_is_chosen(cl, tmp_path, capsys):
     proj = _projections(tmp_path)
     other = dict(PROJ_GEOMETRY.to_dict(), source_to_origin=110.0)
-    scan = _scan_file(tmp_path, geometry=other, volume=SCAN_VOLUME)
+    scan = _grid_file(tmp_path, geometry=other, volume=SCAN_VOLUME)
     out = tmp_path / "v.tif"
     before = _digest([proj, scan])
-    assert cli.main(["reconstruct", str(proj), "--scan-file", str(scan), "-o", str(out)]) == 2
+    assert cli.main(["reconstruct", str(proj), "--grid", str(scan), "-o", str(out)]) == 2
     err = capsys.readouterr().err
     assert err == (f"xrayraster: error: the scan geometries of {scan} and {proj} metadata differ "
-                   "(source_to_origin 110.0 vs 100.0); choose one with --geometry-from scan-file or "
+                   "(source_to_origin 110.0 vs 100.0); choose one with --geometry-from grid or "
                    "--geometry-from projections\n")
     assert not out.exists()
-    for source, want in (("scan-file", xr.ConeBeamGeometry.from_dict(other)), ("projections", PROJ_GEOMETRY)):
-        assert cli.main(["reconstruct", str(proj), "--scan-file", str(scan), "-o", str(out),
+    for source, want in (("grid", xr.ConeBeamGeometry.from_dict(other)), ("projections", PROJ_GEOMETRY)):
+        assert cli.main(["reconstruct", str(proj), "--grid", str(scan), "-o", str(out),
                          "--geometry-from", source]) == 0
         line = capsys.readouterr().out
-        assert f"geometry from {'scan file ' + str(scan) if source == 'scan-file' else 'projections ' + str(proj)}" in line
+        assert f"geometry from {'grid file ' + str(scan) if source == 'grid' else 'projections ' + str(proj)}" in line
         info = read_tiff_info(out)
         assert xr.ConeBeamGeometry.from_dict(info["geometry"]) == want
-        assert info["geometry_source"].startswith({"scan-file": "scan file", "projections": "projections"}[source])
+        assert info["geometry_source"].startswith({"grid": "grid file", "projections": "projections"}[source])
     assert _digest([proj, scan]) == before
 
 
 def test_equal_scan_geometries_are_used_without_a_flag(cl, tmp_path, capsys):
     proj = _projections(tmp_path)
-    scan = _scan_file(tmp_path, geometry=PROJ_GEOMETRY.to_dict(), volume=SCAN_VOLUME)
-    assert cli.main(["reconstruct", str(proj), "--scan-file", str(scan), "-o", str(tmp_path / "v.tif")]) == 0
+    scan = _grid_file(tmp_path, geometry=PROJ_GEOMETRY.to_dict(), volume=SCAN_VOLUME)
+    assert cli.main(["reconstruct", str(proj), "--grid", str(scan), "-o", str(tmp_path / "v.tif")]) == 0
     captured = capsys.readouterr()
-    assert f"geometry from scan file {scan} (equal to the projections')" in captured.out
+    assert f"geometry from grid file {scan} (equal to the projections')" in captured.out
     assert captured.err == ""  # 8 views on a grid 16 across: not under-sampled by the rule's quarter
 
 
@@ -405,50 +405,60 @@ def test_too_few_views_for_the_grid_warn_in_one_line_and_still_succeed(cl, tmp_p
     few = xr.ConeBeamGeometry(100, 200, (16, 16), 0.8, xr.full_circle(4))  # the bundled example's 4 views
     proj = _projections(tmp_path, few)
     out = tmp_path / "v.tif"
-    assert cli.main(["reconstruct", str(proj), "--scan-file", str(_scan_file(tmp_path)), "-o", str(out)]) == 0
+    assert cli.main(["reconstruct", str(proj), "--grid", str(_grid_file(tmp_path)), "-o", str(out)]) == 0
     err = capsys.readouterr().err
     assert err == ("xrayraster: warning: 4 views for a grid 16 voxels across is under-sampled: the angular-sampling "
                    "rule asks for about π/2·16 ≈ 25; expect streaks\n")
     assert out.exists()
 
 
-# --------------------------------------------------------------------------- --scan-file and its older spellings
+# --------------------------------------------------------------------------- --grid and its older spellings
 
 
-def test_reconstruct_geometry_is_a_deprecated_spelling_of_scan_file(cl, tmp_path, capsys):
-    proj, scan = _projections(tmp_path), _scan_file(tmp_path)
-    out = tmp_path / "v.tif"
-    assert cli.main(["reconstruct", str(proj), "--geometry", str(scan), "-o", str(out)]) == 0
-    err = capsys.readouterr().err
-    assert err == f"xrayraster: note: --geometry is deprecated; use --scan-file {scan}\n"
-    assert out.exists()
+def test_reconstruct_scan_file_and_geometry_are_deprecated_spellings_of_grid(cl, tmp_path, capsys):
+    proj, scan = _projections(tmp_path), _grid_file(tmp_path)
+    for n, flag in enumerate(("--scan-file", "--geometry")):
+        out = tmp_path / f"v{n}.tif"
+        assert cli.main(["reconstruct", str(proj), flag, str(scan), "-o", str(out)]) == 0
+        assert capsys.readouterr().err == f"xrayraster: note: {flag} is deprecated; use --grid {scan}\n"
+        assert out.exists()
+    # Given twice, the note is still one line.
+    assert cli.main(["reconstruct", str(proj), "--scan-file", str(scan), "--scan-file", str(scan),
+                     "-o", str(tmp_path / "v2.tif")]) == 0
+    assert capsys.readouterr().err == f"xrayraster: note: --scan-file is deprecated; use --grid {scan}\n"
+    assert cli.main(["reconstruct", str(proj), "--grid", str(scan), "-o", str(tmp_path / "v3.tif"),
+                     "--geometry-from", "scan-file"]) == 2  # the old value means the grid's geometry, which it lacks
+    err = capsys.readouterr().err.splitlines()
+    assert err == ["xrayraster: note: --geometry-from scan-file is deprecated; use --geometry-from grid",
+                   f"xrayraster: error: --geometry-from grid: {scan} has no 'geometry'; add it or drop the flag"]
     with pytest.raises(SystemExit) as exc:
-        cli.main(["reconstruct", str(proj), "--geometry", str(scan), "--scan-file", str(scan), "-o", str(out)])
+        cli.main(["reconstruct", str(proj), "--geometry", str(scan), "--grid", str(scan), "-o", str(out)])
     assert exc.value.code == 2 and "not allowed with argument" in capsys.readouterr().err
     with pytest.raises(SystemExit) as exc:
         cli.main(["reconstruct", str(proj), "-o", str(out)])
     err = capsys.readouterr().err
     assert exc.value.code == 2 and "the following arguments are required" not in err
-    assert err.splitlines()[-1] == "xrayraster reconstruct: error: one of the arguments --scan-file is required"
+    assert err.splitlines()[-1] == "xrayraster reconstruct: error: one of the arguments --grid is required"
 
 
-def test_voxelize_volume_is_a_deprecated_spelling_of_scan_file(gl, tmp_path, capsys):
+def test_voxelize_scan_file_and_volume_are_deprecated_spellings_of_grid(gl, tmp_path, capsys):
     scene = tmp_path / "scene.toml"
     scene.write_text(TINY_SCENE)
-    scan = _scan_file(tmp_path, volume={"shape": [4, 8, 8], "voxel_size": 1.0})
-    for flag, note in (("--scan-file", ""), ("--volume", f"xrayraster: note: --volume is deprecated; use --scan-file {scan}\n")):
+    scan = _grid_file(tmp_path, volume={"shape": [4, 8, 8], "voxel_size": 1.0})
+    for flag, note in (("--grid", ""), ("--scan-file", f"xrayraster: note: --scan-file is deprecated; use --grid {scan}\n"),
+                       ("--volume", f"xrayraster: note: --volume is deprecated; use --grid {scan}\n")):
         out = tmp_path / f"labels{flag}.tif"
         assert cli.main(["voxelize", str(scene), flag, str(scan), "-o", str(out)]) == 0
         assert capsys.readouterr().err == note
         assert tifffile.imread(out).shape == (4, 8, 8) and tifffile.imread(out).max() == 1
 
 
-def test_help_names_scan_file_only(capsys):
+def test_help_names_grid_only(capsys):
     for command in ("reconstruct", "voxelize"):
         with pytest.raises(SystemExit):
             cli.main([command, "--help"])
         text = capsys.readouterr().out
-        assert "--scan-file SCAN.json" in text and "--geometry SCAN" not in text and "--volume" not in text
+        assert "--grid GRID.json" in text and "--geometry SCAN" not in text and "--volume" not in text
 
 
 # --------------------------------------------------------------------------- photon starvation in float32

@@ -1,4 +1,4 @@
-"""``xrayraster reconstruct`` and ``xrayraster voxelize``: the geometry from a scan file or from the
+"""``xrayraster reconstruct`` and ``xrayraster voxelize``: the geometry from a grid file or from the
 projections' metadata, volume TIFFs Fiji reads (voxel size, units), the same numbers as ``xr.fdk``
 and ``xr.voxelize``, and bad input (exit 2)."""
 
@@ -13,7 +13,7 @@ import tifffile
 
 import xrayraster as xr
 from xrayraster import cli
-from xrayraster.io.scan_file import read_scan_file
+from xrayraster.io.grid_file import read_grid_file
 from xrayraster.io.tiff import read_tiff_info, write_tiff
 
 from references.phantoms import project, sphere
@@ -36,13 +36,13 @@ def stack(tmp_path_factory):
 
 
 def _scan(tmp_path, **content):
-    path = tmp_path / "scan.json"
+    path = tmp_path / "grid.json"
     path.write_text(json.dumps(content))
     return path
 
 
 def test_scan_file_geometry_equals_the_python_one(tmp_path):
-    geometry, volume = read_scan_file(_scan(tmp_path, geometry=GEOMETRY_JSON, volume=VOLUME_JSON))
+    geometry, volume = read_grid_file(_scan(tmp_path, geometry=GEOMETRY_JSON, volume=VOLUME_JSON))
     assert volume == VOLUME
     assert geometry.to_vec().array == pytest.approx(GEOMETRY.to_vec().array, abs=1e-12)
 
@@ -52,7 +52,7 @@ def test_reconstruct_writes_the_fdk_volume_with_its_voxel_size(cl, tmp_path, sta
     path, p = stack
     scan = _scan(tmp_path, volume=VOLUME_JSON, **({"geometry": GEOMETRY_JSON} if with_geometry else {}))
     out = tmp_path / "vol.tif"
-    assert cli.main(["reconstruct", str(path), "--scan-file", str(scan), "-o", str(out), "--filter", "hann"]) == 0
+    assert cli.main(["reconstruct", str(path), "--grid", str(scan), "-o", str(out), "--filter", "hann"]) == 0
     assert "12×20×24 voxels" in capsys.readouterr().out
     with tifffile.TiffFile(out) as tif:
         data = tif.asarray()
@@ -73,7 +73,7 @@ def test_reconstruct_switches_force_the_weights_and_the_truncation_correction(cl
     and the choices in the TIFF's metadata."""
     path, p = stack
     out = tmp_path / "vol.tif"
-    assert cli.main(["reconstruct", str(path), "--scan-file", str(_scan(tmp_path, volume=VOLUME_JSON)), "-o", str(out),
+    assert cli.main(["reconstruct", str(path), "--grid", str(_scan(tmp_path, volume=VOLUME_JSON)), "-o", str(out),
                      "--displaced", "on", "--truncation", "on", "--truncation-width", "0.3"]) == 0
     info = read_tiff_info(out)
     assert info["displaced"] is True and info["truncation"] is True and info["truncation_width"] == 0.3
@@ -86,32 +86,32 @@ def test_reconstruct_bad_input_exits_2_and_names_the_fix(tmp_path, stack, capsys
     path, p = stack
     out = tmp_path / "vol.tif"
     wrong = dict(GEOMETRY_JSON, views=59)
-    assert cli.main(["reconstruct", str(path), "--scan-file", str(_scan(tmp_path, geometry=wrong, volume=VOLUME_JSON)),
+    assert cli.main(["reconstruct", str(path), "--grid", str(_scan(tmp_path, geometry=wrong, volume=VOLUME_JSON)),
                      "-o", str(out)]) == 2
     err = capsys.readouterr().err
     assert "scan geometries of" in err and "differ (num_views 59 vs 60" in err and "--geometry-from" in err, err
-    assert cli.main(["reconstruct", str(path), "--scan-file", str(_scan(tmp_path, geometry=wrong, volume=VOLUME_JSON)),
-                     "--geometry-from", "scan-file", "-o", str(out)]) == 2
+    assert cli.main(["reconstruct", str(path), "--grid", str(_scan(tmp_path, geometry=wrong, volume=VOLUME_JSON)),
+                     "--geometry-from", "grid", "-o", str(out)]) == 2
     assert "geometry has 59 views" in capsys.readouterr().err
     bare = tmp_path / "bare.tif"
     tifffile.imwrite(bare, p)
-    assert cli.main(["reconstruct", str(bare), "--scan-file", str(_scan(tmp_path, volume=VOLUME_JSON)), "-o", str(out)]) == 2
+    assert cli.main(["reconstruct", str(bare), "--grid", str(_scan(tmp_path, volume=VOLUME_JSON)), "-o", str(out)]) == 2
     assert "has no 'geometry'" in capsys.readouterr().err
-    assert cli.main(["reconstruct", str(path), "--scan-file", str(_scan(tmp_path, geometry=GEOMETRY_JSON)), "-o", str(out)]) == 2
+    assert cli.main(["reconstruct", str(path), "--grid", str(_scan(tmp_path, geometry=GEOMETRY_JSON)), "-o", str(out)]) == 2
     assert "needs a 'volume'" in capsys.readouterr().err
     bad = dict(GEOMETRY_JSON, angles_deg=[0, 90])
-    assert cli.main(["reconstruct", str(path), "--scan-file", str(_scan(tmp_path, geometry=bad, volume=VOLUME_JSON)),
+    assert cli.main(["reconstruct", str(path), "--grid", str(_scan(tmp_path, geometry=bad, volume=VOLUME_JSON)),
                      "-o", str(out)]) == 2
     assert "not both" in capsys.readouterr().err
     raw = tmp_path / "raw.tif"
     write_tiff(raw, p, axes="TYX", pixel_size_mm=(0.8, 0.8), info={"output": "raw", "geometry": GEOMETRY.to_dict()})
-    assert cli.main(["reconstruct", str(raw), "--scan-file", str(_scan(tmp_path, volume=VOLUME_JSON)), "-o", str(out)]) == 2
+    assert cli.main(["reconstruct", str(raw), "--grid", str(_scan(tmp_path, volume=VOLUME_JSON)), "-o", str(out)]) == 2
     assert "raw detector signal" in capsys.readouterr().err
     assert not out.exists()
 
 
 def test_angles_in_degrees_in_scan_files(tmp_path):
-    g, _ = read_scan_file(_scan(tmp_path, geometry=dict(GEOMETRY_JSON, views=4, arc_deg=180, start_deg=10),
+    g, _ = read_grid_file(_scan(tmp_path, geometry=dict(GEOMETRY_JSON, views=4, arc_deg=180, start_deg=10),
                                 volume=VOLUME_JSON))
     assert g.angles == pytest.approx([math.radians(a) for a in (10, 55, 100, 145)])
 
@@ -126,7 +126,7 @@ def test_voxelize_writes_labels_fiji_reads(gl, tmp_path, capsys):
     example = Path(__file__).resolve().parent.parent / "examples" / "bracket_and_ball.toml"
     volume = {"shape": [32, 48, 40], "voxel_size": [0.3, 0.25, 0.3], "offset": [0.0, 0.5, -0.2]}
     out = tmp_path / "labels.tif"
-    assert cli.main(["voxelize", str(example), "--scan-file", str(_scan(tmp_path, volume=volume)), "-o", str(out)]) == 0
+    assert cli.main(["voxelize", str(example), "--grid", str(_scan(tmp_path, volume=volume)), "-o", str(out)]) == 0
     assert "uint8 labels" in capsys.readouterr().out
     with tifffile.TiffFile(out) as tif:
         data = tif.asarray()
@@ -137,10 +137,10 @@ def test_voxelize_writes_labels_fiji_reads(gl, tmp_path, capsys):
     want = xr.voxelize(load_scene_file(example).scene, xr.VolumeGeometry((32, 48, 40), (0.3, 0.25, 0.3), (0.0, 0.5, -0.2)),
                        context=gl).data
     assert np.array_equal(data, want) and set(np.unique(data)) == {0, 1, 2}
-    assert cli.main(["voxelize", str(example), "--scan-file", str(_scan(tmp_path, volume=volume)), "-o", str(out),
+    assert cli.main(["voxelize", str(example), "--grid", str(_scan(tmp_path, volume=volume)), "-o", str(out),
                      "--fractions", "2"]) == 0
     shares = tifffile.imread(tmp_path / "labels_fractions.tif")
     assert shares.shape == (32, 3, 48, 40) and read_tiff_info(tmp_path / "labels_fractions.tif")["channel_labels"] == [0, 1, 2]
     np.testing.assert_allclose(shares.sum(axis=1), 1.0, atol=1e-6)
-    assert cli.main(["voxelize", str(example), "--scan-file", str(_scan(tmp_path, geometry=GEOMETRY_JSON)), "-o", str(out)]) == 2
+    assert cli.main(["voxelize", str(example), "--grid", str(_scan(tmp_path, geometry=GEOMETRY_JSON)), "-o", str(out)]) == 2
     assert "needs a 'volume'" in capsys.readouterr().err

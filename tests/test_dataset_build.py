@@ -70,6 +70,15 @@ def reference(gl, cl, tmp_path_factory):
     return folder / "out", report
 
 
+def test_label_0_has_one_name_in_a_build_and_its_readers(reference):
+    """nnU-Net v2 requires label 0 to be called "background" in dataset.json; the scan's record,
+    the manifest's fraction column and xr.ml use the same name."""
+    out, _ = reference
+    sample = json.loads((out / "samples" / "00000" / "sample.json").read_text())
+    assert sample["scan"]["labels"]["0"] == "background"
+    assert "fraction.background" in next(csv.reader(open(out / "manifest.csv")))
+    assert xr.ml.PatchDataset(out, (8, 8, 8), split=None).dataset.labels[0] == "background"
+
 def test_every_sample_is_the_scan_of_its_draw(reference):
     out, report = reference
     assert report.built == (0, 1, 2, 3) and report.skipped == 0 and not report.failed

@@ -1,6 +1,6 @@
 """The documentation's examples work: every ```python block of README.md and docs/*.md runs, every
 ```toml block loads through the scene loader (a scan file's, one with a table only scan files
-have, through the scan-file loader) and renders, every ```json block loads as a scan
+have, through the scan-file loader) and renders, every ```json block loads as a grid
 file, and the README's commands are the ones CI runs.
 
 Python blocks run one by one in a fresh namespace, with the working directory a temporary folder
@@ -83,12 +83,12 @@ def test_python_block_runs(doc, line, code, expect, workdir, request):
 
 
 @pytest.mark.parametrize("doc, line, text, expect", _params(JSON))
-def test_json_scan_file_loads(doc, line, text, expect, tmp_path):
-    from xrayraster.io.scan_file import read_scan_file
+def test_json_grid_file_loads(doc, line, text, expect, tmp_path):
+    from xrayraster.io.grid_file import read_grid_file
 
-    path = tmp_path / "scan.json"
+    path = tmp_path / "grid.json"
     path.write_text(text)
-    geometry, volume = read_scan_file(path)
+    geometry, volume = read_grid_file(path)
     assert geometry is not None and geometry.num_views >= 1 and all(n >= 1 for n in volume.shape)
 
 

@@ -27,7 +27,7 @@ def weave_text() -> str:
 
 
 def tiny_stack(directory: Path) -> tuple[Path, Path]:
-    """A 4-view, 8×8 projections TIFF with its geometry, and a JSON scan file with an 8³ grid."""
+    """A 4-view, 8×8 projections TIFF with its geometry, and a JSON grid file with an 8³ grid."""
     geometry = xr.ConeBeamGeometry(source_to_origin=50.0, source_to_detector=100.0, detector_shape=(8, 8),
                                    pixel_size=0.5, angles=xr.full_circle(4))
     projections = xr.Projections(np.zeros((4, 8, 8), np.float32), geometry, "lineint", "1", {})
@@ -51,15 +51,15 @@ COMMANDS = {
     "weave": ("toml", lambda d: weave_text(), lambda d, bad: ["weave", bad, "-o", d / "out", "--quiet"], ()),
     "render": ("toml", lambda d: _scene_text(), lambda d, bad: ["render", bad, "-o", d / "out.tif"], ("gl",)),
     "voxelize scene": ("toml", lambda d: _scene_text(),
-                       lambda d, bad: ["voxelize", bad, "--scan-file", EXAMPLES / "bracket_ct.scan.json",
+                       lambda d, bad: ["voxelize", bad, "--grid", EXAMPLES / "bracket_ct.grid.json",
                                        "-o", d / "out.tif"], ("gl",)),
-    "voxelize scan file": ("json", lambda d: (EXAMPLES / "bracket_ct.scan.json").read_text(encoding="utf-8"),
-                           lambda d, bad: ["voxelize", EXAMPLES / "bracket_ct.toml", "--scan-file", bad,
+    "voxelize grid file": ("json", lambda d: (EXAMPLES / "bracket_ct.grid.json").read_text(encoding="utf-8"),
+                           lambda d, bad: ["voxelize", EXAMPLES / "bracket_ct.toml", "--grid", bad,
                                            "-o", d / "out.tif"], ("gl",)),
-    "reconstruct projections": ("tif", None, lambda d, bad: ["reconstruct", bad, "--scan-file", tiny_stack(d)[1],
+    "reconstruct projections": ("tif", None, lambda d, bad: ["reconstruct", bad, "--grid", tiny_stack(d)[1],
                                                              "-o", d / "v.tif"], ()),
-    "reconstruct scan file": ("json", lambda d: tiny_stack(d)[1].read_text(encoding="utf-8"),
-                              lambda d, bad: ["reconstruct", tiny_stack(d)[0], "--scan-file", bad, "-o", d / "v.tif"],
+    "reconstruct grid file": ("json", lambda d: tiny_stack(d)[1].read_text(encoding="utf-8"),
+                              lambda d, bad: ["reconstruct", tiny_stack(d)[0], "--grid", bad, "-o", d / "v.tif"],
                               ("cl",)),
     "compare": ("tif", None, lambda d, bad: ["compare", bad, tiny_volume(d)], ()),
     # Files a scene file names: a mesh (binary STL) and a spectrum (two-column text).

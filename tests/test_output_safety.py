@@ -27,7 +27,7 @@ ROOT = Path(__file__).resolve().parent.parent
 SCAN = ROOT / "examples" / "scan_small.toml"
 SCENE = ROOT / "examples" / "bracket_and_ball.toml"
 # The names the commands write, each present as the user's own file.
-TOOL_NAMES = ("volume.tif", "labels.tif", "projections.tif", "radiograph.tif", "scan.json", "report.json",
+TOOL_NAMES = ("volume.tif", "labels.tif", "projections.tif", "radiograph.tif", "scan.json", "grid.json", "report.json",
               "compare.json", "slices.png", "volume.png", "histograms.png", "matrix.stl", "weft.stl", "warp.stl",
               "scene.toml", "seg_fractions.tif")
 
@@ -121,16 +121,16 @@ def test_every_command_into_a_users_directory(made, user, where, capsys):
         (["scan", scan_file, "-o", str(target), "--quiet"], "labels.tif, scan.json, slices.png"),
         (["scan", scan_file, "-o", str(target), "--quiet", "--force"], "labels.tif, scan.json, slices.png, volume.tif"),
         (["scan", scan_file, "-o", str(target / "volume.tif"), "--quiet"], "ends in .tif"),
-        (["weave", weave, "-o", str(target), "--quiet"], "report.json, scan.json, scene.toml"),
-        (["weave", weave, "-o", str(target), "--quiet", "--force"], "report.json, scan.json, scene.toml"),
+        (["weave", weave, "-o", str(target), "--quiet"], "grid.json, report.json, scene.toml"),
+        (["weave", weave, "-o", str(target), "--quiet", "--force"], "grid.json, report.json, scene.toml"),
         # File commands: every name of the user's that the command would write.
         (["render", str(SCENE), "-o", str(target / "radiograph.tif"), "--path-lengths"], "radiograph.tif"),
         (["render", str(SCENE), "-o", str(target / "volume.tif"), "--path-lengths"], "volume.tif"),
         (["render", str(SCENE), "-o", str(target / "mine.tif"), "--path-lengths"], "volume.tif"),
-        (["reconstruct", str(projections), "--scan-file", str(grid), "-o", str(target / "volume.tif")], "volume.tif"),
-        (["reconstruct", str(projections), "--scan-file", str(grid), "-o", str(target / "slices.tif")], "slices.png"),
-        (["voxelize", str(SCENE), "--scan-file", str(grid), "-o", str(target / "labels.tif")], "labels.tif"),
-        (["voxelize", str(SCENE), "--scan-file", str(grid), "-o", str(target / "seg.tif"), "--fractions", "2"],
+        (["reconstruct", str(projections), "--grid", str(grid), "-o", str(target / "volume.tif")], "volume.tif"),
+        (["reconstruct", str(projections), "--grid", str(grid), "-o", str(target / "slices.tif")], "slices.png"),
+        (["voxelize", str(SCENE), "--grid", str(grid), "-o", str(target / "labels.tif")], "labels.tif"),
+        (["voxelize", str(SCENE), "--grid", str(grid), "-o", str(target / "seg.tif"), "--fractions", "2"],
          "seg_fractions.tif"),
         (["compare", str(projections), str(projections), "-o", str(target)], "histograms.png"),
         (["compare", str(projections), str(projections), "--png", str(target / "slices.png")], "slices.png"),

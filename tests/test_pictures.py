@@ -17,7 +17,7 @@ from xrayraster.core.tiff import quicklook_factor
 from xrayraster.core.volume import VolumeGeometry
 
 SHAPE = (8, 20, 30)  # z, y, x
-NAMES = {"0": "air", "1": "matrix", "2": "weft", "3": "warp"}
+NAMES = {"0": "background", "1": "matrix", "2": "weft", "3": "warp"}
 
 
 def box_sample(mu: float = 0.5):

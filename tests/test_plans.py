@@ -20,7 +20,7 @@ import xrayraster as xr
 from xrayraster.core.estimate import Estimate, Part, duration_text
 from xrayraster.io.weave_file import load_weave_file
 from xrayraster.pipeline.plan import scan_estimate
-from xrayraster.pipeline.scan_file import load_scan_file
+from xrayraster.io.scan_file import load_scan_file
 from xrayraster.simulate.estimate import render_estimate
 from xrayraster.weave.size import estimated_triangles
 

@@ -18,7 +18,7 @@ import xrayraster as xr
 from xrayraster import cli
 from xrayraster.core.errors import ConfigError
 from xrayraster.pipeline import load_scan_file
-from xrayraster.pipeline.pose import Pose
+from xrayraster.io.pose import Pose
 
 
 EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "scan_small.toml"

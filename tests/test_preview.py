@@ -294,7 +294,7 @@ def test_a_quick_slice_is_the_middle_of_the_grid_from_a_cut_down_scan(previewer)
     # The labels are those of the sample on that one slice, as xr.voxelize gives them on its own.
     grid = VolumeGeometry((1, 128, 128), 0.2312, (cut.z_mm, 0.0, 0.0))
     np.testing.assert_array_equal(cut.labels, xr.voxelize(loaded.sample_scene(), grid).data[0])
-    assert cut.names == {0: "air", 1: "matrix", 2: "weft", 3: "warp"}
+    assert cut.names == {0: "background", 1: "matrix", 2: "weft", 3: "warp"}
     # Denser carbon reconstructs higher: warp (1.82 g/cm³) over weft (1.72) over matrix (1.08) over air.
     means = [float(cut.image[cut.labels == k].mean()) for k in range(4)]
     assert abs(means[0]) < 0.2 * means[1] and means[1] < means[2] < means[3]

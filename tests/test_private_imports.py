@@ -70,7 +70,7 @@ def test_resolves_relative_imports():
     def resolve(module, is_package, source):
         return _resolve(module, is_package, ast.parse(source).body[0])
 
-    assert resolve("xrayraster.pipeline.scan_keys", False, "from ..io.scene_file import x") == "xrayraster.io.scene_file"
+    assert resolve("xrayraster.dataset.dataset_file", False, "from ..io.scene_file import x") == "xrayraster.io.scene_file"
     assert resolve("xrayraster.ml.predict", False, "from .patches import x") == "xrayraster.ml.patches"
     assert resolve("xrayraster.ml", True, "from .patches import x") == "xrayraster.ml.patches"
     assert resolve("xrayraster.ml", True, "from . import patches") == "xrayraster.ml"

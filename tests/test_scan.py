@@ -276,7 +276,7 @@ def test_mesh_resolution_follows_the_grid(tmp_path):
     """Knobs left open in [weave.sample] are chosen for the grid: the predicted error (tessellation
     theory, tested against measured meshes in test_weave_tessellation.py) stays within the
     tolerance, a coarser grid gets a coarser mesh, and knobs the file gives are kept."""
-    from xrayraster.pipeline.scan_file import load_scan_file
+    from xrayraster.io.scan_file import load_scan_file
     from xrayraster.weave.tessellation import binder_bend_radius_mm, path_error_mm, section_error_mm
 
     text = example_text()

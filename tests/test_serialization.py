@@ -14,7 +14,7 @@ import pytest
 import xrayraster as xr
 from xrayraster.core.geometry import geometry_from_dict
 from xrayraster.io import read_projections, write_projections
-from xrayraster.io.scan_file import read_scan_file
+from xrayraster.io.grid_file import read_grid_file
 from xrayraster.io.scene_file import load_scene_file
 
 CONE = xr.ConeBeamGeometry(100.0, 250.0, (12, 16), (0.5, 0.25), xr.full_circle(90), detector_offset=(1.0, -2.0))
@@ -56,19 +56,19 @@ def test_one_key_set_for_toml_json_and_metadata(tmp_path):
     assert tomllib.loads(toml)["geometry"] == d
     assert load_scene_file(tmp_path / "scene.toml").geometry == CONE
     (tmp_path / "scan.json").write_text(json.dumps({"geometry": d, "volume": GEOMETRIES["volume"].to_dict()}))
-    assert read_scan_file(tmp_path / "scan.json") == (CONE, GEOMETRIES["volume"])
+    assert read_grid_file(tmp_path / "scan.json") == (CONE, GEOMETRIES["volume"])
 
 
 def test_older_scan_file_spellings_are_still_read(tmp_path):
     older = {"type": "cone", "source_to_origin": 100, "source_to_detector": 250, "detector_shape": [12, 16],
              "pixel_size": [0.5, 0.25], "detector_offset": [1.0, -2.0], "views": 4, "arc_deg": 180, "start_deg": 10}
     (tmp_path / "scan.json").write_text(json.dumps({"geometry": older, "volume": {"shape": 4, "voxel_size": 1}}))
-    geometry, volume = read_scan_file(tmp_path / "scan.json")
+    geometry, volume = read_grid_file(tmp_path / "scan.json")
     np.testing.assert_allclose(np.degrees(geometry.angles), [10, 55, 100, 145], atol=1e-12)
     assert volume == xr.VolumeGeometry((4, 4, 4), 1.0)
     vector = {"type": "vector", "detector_shape": [12, 16], "vectors": GEOMETRIES["vector"].to_dict()["vectors"]}
     (tmp_path / "scan.json").write_text(json.dumps({"geometry": vector, "volume": {"shape": 4, "voxel_size": 1}}))
-    assert read_scan_file(tmp_path / "scan.json")[0] == GEOMETRIES["vector"]
+    assert read_grid_file(tmp_path / "scan.json")[0] == GEOMETRIES["vector"]
 
 
 @pytest.mark.parametrize("change, message", [

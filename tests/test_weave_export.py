@@ -7,6 +7,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tomllib
@@ -20,6 +21,7 @@ import trimesh
 import xrayraster as xr
 from references.solids import is_manifold
 from xrayraster import cli
+from xrayraster.io.grid_file import read_grid_file
 from xrayraster.io.scene_file import load_scene_file
 from xrayraster.weave import Sample, UnitCell
 
@@ -149,13 +151,27 @@ def test_render_and_voxelize_take_the_scene_as_it_is(exported, gl, tmp_path):
     scene = exported / "out" / "scene.toml"
     assert cli.main(["render", str(scene), "-o", str(tmp_path / "r.tif")]) == 0
     out = tmp_path / "labels.tif"
-    assert cli.main(["voxelize", str(scene), "--scan-file", str(exported / "out" / "scan.json"), "-o", str(out)]) == 0
+    assert cli.main(["voxelize", str(scene), "--grid", str(exported / "out" / "grid.json"), "-o", str(out)]) == 0
     labels = tifffile.imread(out)
     assert set(np.unique(labels)) == {1, 2, 3}                           # the grid covers the box: no background
     report = _report(exported / "out")
     for family, label in (("weft", 2), ("warp", 3)):
         assert np.mean(labels == label) == pytest.approx(report["volume_fraction"][family], abs=0.03)
 
+
+
+def test_an_export_from_before_the_grid_file_was_named_reads_and_is_replaced(exported, tmp_path):
+    """Exports once wrote the grid as scan.json: it reads as a grid file, and a new export over the
+    old one (recognised by its report) leaves grid.json and no scan.json."""
+    old = tmp_path / "old"
+    shutil.copytree(exported / "out", old)
+    (old / "grid.json").rename(old / "scan.json")
+    report = _report(old)
+    report["files"] = sorted("scan.json" if f == "grid.json" else f for f in report["files"])
+    (old / "report.json").write_text(json.dumps(report))
+    assert read_grid_file(old / "scan.json") == read_grid_file(exported / "out" / "grid.json")
+    assert cli.main(["weave", str(exported / "weave.toml"), "-o", str(old), "--quiet"]) == 0
+    assert (old / "grid.json").exists() and not (old / "scan.json").exists()
 
 @pytest.mark.parametrize("edit, message", [
     (("[weave.sample]", "[weave.sample]\ncell = [1, 1]"), "cell"),

@@ -1,4 +1,4 @@
-"""Options several commands share: ``--scan-file`` (with its deprecated spellings) and integer checks."""
+"""Options several commands share: ``--grid`` (with its deprecated spellings) and integer checks."""
 
 from __future__ import annotations
 
@@ -26,17 +26,27 @@ nonnegative_int = _int_at_least(0)
 positive_int = _int_at_least(1)
 
 
-class _DeprecatedScanFile(argparse.Action):
-    """An older spelling of ``--scan-file``: still works, and says so on stderr (one line)."""
+def note_deprecated(old: str, new: str) -> None:
+    """One line on stderr: ``old`` still works, ``new`` is its name now."""
+    print(f"xrayraster: note: {old} is deprecated; use {new}", file=sys.stderr)
+
+
+class _DeprecatedGrid(argparse.Action):
+    """An older spelling of ``--grid`` (``--scan-file``, and before it ``--geometry`` or ``--volume``):
+    still works, and says so on stderr, once a command."""
 
     def __call__(self, parser, namespace, values, option_string=None):
-        print(f"xrayraster: note: {option_string} is deprecated; use --scan-file {values}", file=sys.stderr)
+        if getattr(namespace, self.dest, None) is None:
+            note_deprecated(option_string, f"--grid {values}")
         setattr(namespace, self.dest, values)
 
 
-def add_scan_file(parser, help: str, *, deprecated: str) -> None:
-    """``--scan-file SCAN.json`` (required), and ``deprecated`` (e.g. ``--geometry``), its hidden older spelling."""
+def add_grid(parser, help: str, *, deprecated: str) -> None:
+    """``--grid GRID.json`` (required; io/grid_file.py), and its hidden older spellings: ``--scan-file``
+    (the grid file's name until the TOML input of ``xrayraster scan`` took it) and ``deprecated``
+    (e.g. ``--geometry``)."""
     group = parser.add_mutually_exclusive_group(required=True)
-    group.add_argument("--scan-file", dest="scan_file", metavar="SCAN.json", type=Path, help=help)
-    group.add_argument(deprecated, dest="scan_file", metavar="SCAN.json", type=Path, action=_DeprecatedScanFile,
-                       help=argparse.SUPPRESS)
+    group.add_argument("--grid", dest="grid", metavar="GRID.json", type=Path, help=help)
+    for old in ("--scan-file", deprecated):
+        group.add_argument(old, dest="grid", metavar="GRID.json", type=Path, action=_DeprecatedGrid,
+                           help=argparse.SUPPRESS)

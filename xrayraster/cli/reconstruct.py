@@ -1,4 +1,4 @@
-"""``xrayraster reconstruct PROJECTIONS.tif --scan-file SCAN.json -o VOLUME.tif``: FDK or FBP of a projection stack."""
+"""``xrayraster reconstruct PROJECTIONS.tif --grid GRID.json -o VOLUME.tif``: FDK or FBP of a projection stack."""
 
 from __future__ import annotations
 
@@ -15,13 +15,13 @@ from ..core.errors import ConfigError
 from ..core.geometry import geometry_from_dict
 from ..core.inputs import read_tiff_file
 from ..core.tiff import quicklook_path
-from ..io.scan_file import read_scan_file
+from ..io.grid_file import read_grid_file
 from ..recon.fdk import fdk
 from ..recon.truncation import DEFAULT_WIDTH
-from .options import add_scan_file
+from .options import add_grid, note_deprecated
 from .outputs import check_outputs
 
-GEOMETRY_SOURCES = ("scan-file", "projections")
+GEOMETRY_SOURCES = ("grid", "projections")
 SWITCH = {"auto": "auto", "on": True, "off": False}  # --displaced, --truncation
 
 # Angular sampling. The usual rule asks for about (π/2)·N views over the scan for a grid N voxels
@@ -34,6 +34,14 @@ SWITCH = {"auto": "auto", "on": True, "off": False}  # --displaced, --truncation
 UNDERSAMPLED_SHARE = 0.25
 
 
+def _geometry_source(text: str) -> str:
+    """``--geometry-from``'s value; ``scan-file``, the grid file's older name, still works and says so."""
+    if text == "scan-file":
+        note_deprecated("--geometry-from scan-file", "--geometry-from grid")
+        return "grid"
+    return text
+
+
 def views_needed(volume) -> float:
     """(π/2)·N views for a grid N voxels across its larger transverse side (y, x)."""
     return math.pi / 2 * max(volume.shape[1], volume.shape[2])
@@ -42,10 +50,10 @@ def views_needed(volume) -> float:
 def add_parser(subparsers) -> None:
     rec = subparsers.add_parser("reconstruct", help="FDK (cone beam) or FBP (parallel beam) reconstruction of a projection stack")
     rec.add_argument("projections", type=Path, help="TIFF stack (views, rows, cols), e.g. from 'xrayraster render --views all'")
-    add_scan_file(rec, "scan file: the volume grid, and the scan geometry unless the TIFF carries it "
+    add_grid(rec, "grid file: the volume grid, and the scan geometry unless the TIFF carries it "
                        "(docs/reconstruction.md)", deprecated="--geometry")
-    rec.add_argument("--geometry-from", choices=GEOMETRY_SOURCES, default=None,
-                     help="which scan geometry to use when the scan file and the TIFF's metadata both give one "
+    rec.add_argument("--geometry-from", choices=GEOMETRY_SOURCES, type=_geometry_source, default=None,
+                     help="which scan geometry to use when the grid file and the TIFF's metadata both give one "
                           "(default: they must agree)")
     rec.add_argument("-o", "--out", dest="out", metavar="VOLUME.tif", type=Path, required=True,
                      help="float32 TIFF volume (z, y, x) in 1/cm (a PNG of the central slice goes beside it)")
@@ -92,8 +100,8 @@ def _differences(a, b) -> str:
 
 
 def choose_geometry(args, scan_geometry, info):
-    """The scan geometry to use and where it came from (scan file, projections' metadata, or both)."""
-    scan, proj = str(args.scan_file), f"{args.projections} metadata"
+    """The scan geometry to use and where it came from (grid file, projections' metadata, or both)."""
+    grid, proj = str(args.grid), f"{args.projections} metadata"
 
     def from_tiff():
         if "geometry" not in info:
@@ -101,37 +109,37 @@ def choose_geometry(args, scan_geometry, info):
         if not isinstance(info["geometry"], dict):
             if args.geometry_from == "projections" or scan_geometry is None:
                 raise ConfigError(f"{args.projections} carries its geometry in an older form (a Python repr); add the "
-                                  f"scan geometry to {args.scan_file} (docs/reconstruction.md)")
+                                  f"scan geometry to {args.grid} (docs/reconstruction.md)")
             return None
         return geometry_from_dict(info["geometry"], f"{proj} geometry")
 
-    if args.geometry_from == "scan-file":
+    if args.geometry_from == "grid":
         if scan_geometry is None:
-            raise ConfigError(f"--geometry-from scan-file: {args.scan_file} has no 'geometry'; add it or drop the flag")
-        return scan_geometry, f"scan file {scan}"
+            raise ConfigError(f"--geometry-from grid: {args.grid} has no 'geometry'; add it or drop the flag")
+        return scan_geometry, f"grid file {grid}"
     tiff_geometry = from_tiff()
     if args.geometry_from == "projections":
         if tiff_geometry is None:
             raise ConfigError(f"--geometry-from projections: {args.projections} carries no geometry in its metadata; "
-                              "use the scan file's (drop the flag)")
+                              "use the grid file's (drop the flag)")
         return tiff_geometry, f"projections {proj}"
     if scan_geometry is None and tiff_geometry is None:
-        raise ConfigError(f"{args.scan_file} has no 'geometry' and {args.projections} carries none in its metadata; "
-                          "add the scan geometry to the scan file (docs/reconstruction.md)")
+        raise ConfigError(f"{args.grid} has no 'geometry' and {args.projections} carries none in its metadata; "
+                          "add the scan geometry to the grid file (docs/reconstruction.md)")
     if tiff_geometry is None:
-        return scan_geometry, f"scan file {scan}"
+        return scan_geometry, f"grid file {grid}"
     if scan_geometry is None:
         return tiff_geometry, proj
     if not same_geometry(scan_geometry, tiff_geometry):
-        raise ConfigError(f"the scan geometries of {scan} and {proj} differ ({_differences(scan_geometry, tiff_geometry)}); "
-                          "choose one with --geometry-from scan-file or --geometry-from projections")
-    return scan_geometry, f"scan file {scan} (equal to the projections')"
+        raise ConfigError(f"the scan geometries of {grid} and {proj} differ ({_differences(scan_geometry, tiff_geometry)}); "
+                          "choose one with --geometry-from grid or --geometry-from projections")
+    return scan_geometry, f"grid file {grid} (equal to the projections')"
 
 
 def run(args) -> int:
-    check_outputs([args.out, quicklook_path(args.out)], [args.projections, args.scan_file])
-    scan_geometry, volume = read_scan_file(args.scan_file)
-    stack, info = read_tiff_file(args.projections, "projections")  # info {}: from elsewhere, the scan file gives the geometry
+    check_outputs([args.out, quicklook_path(args.out)], [args.projections, args.grid])
+    scan_geometry, volume = read_grid_file(args.grid)
+    stack, info = read_tiff_file(args.projections, "projections")  # info {}: from elsewhere, the grid file gives the geometry
     if info.get("quantity") == "path length":
         raise ConfigError(f"{args.projections} holds path lengths per material; reconstruct radiographs "
                           "(xrayraster render without --path-lengths)")

@@ -1,4 +1,4 @@
-"""``xrayraster voxelize SCENE.toml --scan-file SCAN.json -o LABELS.tif``: label volumes on a scan file's voxel grid."""
+"""``xrayraster voxelize SCENE.toml --grid GRID.json -o LABELS.tif``: label volumes on a grid file's voxel grid."""
 
 from __future__ import annotations
 
@@ -10,16 +10,16 @@ import numpy as np
 
 from ..core.tiff import quicklook_path
 from ..gl.voxelize import fractions_path, voxelize
-from ..io.scan_file import read_scan_file
+from ..io.grid_file import read_grid_file
 from ..io.scene_file import load_scene_file
-from .options import add_scan_file, positive_int
+from .options import add_grid, positive_int
 from .outputs import check_outputs
 
 
 def add_parser(subparsers) -> None:
     vox = subparsers.add_parser("voxelize", help="label volume of a TOML scene on a voxel grid (the reconstruction's)")
     vox.add_argument("scene", type=Path, help="scene file (docs/scene-format.md): objects, labels, priorities")
-    add_scan_file(vox, "scan file whose 'volume' gives the voxel grid (docs/reconstruction.md)", deprecated="--volume")
+    add_grid(vox, "grid file whose 'volume' gives the voxel grid (docs/reconstruction.md)", deprecated="--volume")
     vox.add_argument("-o", "--out", dest="out", metavar="LABELS.tif", type=Path, required=True,
                      help="uint8 (uint16 above 255 labels) TIFF (z, y, x); a PNG of the central slice goes beside it")
     vox.add_argument("--fractions", metavar="K", type=positive_int, default=None,
@@ -31,9 +31,9 @@ def add_parser(subparsers) -> None:
 
 def run(args) -> int:
     side = [quicklook_path(args.out)] + ([fractions_path(args.out)] if args.fractions is not None else [])
-    check_outputs([args.out, *side], [args.scene, args.scan_file])
+    check_outputs([args.out, *side], [args.scene, args.grid])
     loaded = load_scene_file(args.scene)
-    _, volume = read_scan_file(args.scan_file)
+    _, volume = read_grid_file(args.grid)
     start = time.perf_counter()
     labels = voxelize(loaded.scene, volume, fractions=args.fractions)
     seconds = time.perf_counter() - start

@@ -5,8 +5,8 @@ under a temporary name and moved into place when complete; an existing ``DIR`` i
 it holds nothing but an earlier ``xrayraster weave`` output (``--force``: its files are replaced,
 anything else in it is kept), which is checked before any work. It then holds
 the mesh files, ``report.json``, ``scene.toml`` (``xrayraster render DIR/scene.toml``) and
-``scan.json``, a voxel grid over the sample at the scene's magnified pixel pitch (``xrayraster
-voxelize DIR/scene.toml --scan-file DIR/scan.json``).
+``grid.json``, a grid file: the voxel grid over the sample at the scene's magnified pixel pitch
+(``xrayraster voxelize DIR/scene.toml --grid DIR/grid.json``).
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from pathlib import Path
 
 from ..core.choices import EXPORT_PER, MESH_FORMATS, WEAVE_RESOLVE
 from ..io.weave_file import load_weave_file
-from ..pipeline.woven import SCAN_NAME, SCENE_NAME, output_directory, weave
+from ..pipeline.woven import GRID_NAME, SCENE_NAME, output_directory, weave
 from ..weave.size import weave_estimate
 
 
@@ -52,5 +52,5 @@ def run(args) -> int:
     print(f"{args.out}: {len(report['parts'])} mesh files ({report['triangles']} triangles), {report['yarns']['total']} "
           f"yarns; volume fractions {fractions}; {seconds:.2f} s.\n  render:   xrayraster render "
           f"{args.out / SCENE_NAME} -o radiograph.tif\n  voxelize: xrayraster voxelize {args.out / SCENE_NAME} "
-          f"--scan-file {args.out / SCAN_NAME} -o labels.tif")
+          f"--grid {args.out / GRID_NAME} -o labels.tif")
     return 0

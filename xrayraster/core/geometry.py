@@ -30,7 +30,7 @@ subset of views, and construction validates every field with an error that names
 Dict form
 ---------
 ``g.to_dict()`` and ``type(g).from_dict(d)`` (or :func:`geometry_from_dict` for any kind) use one
-key set, the one of TOML scene files, JSON scan files and TIFF metadata; lengths mm, angles in
+key set, the one of TOML scene files, JSON grid files and TIFF metadata; lengths mm, angles in
 degrees as in every config:
 
 * scan geometries: ``beam`` (``"cone"``, the default, or ``"parallel"``), ``detector_shape``

@@ -78,7 +78,7 @@ class Projections:
         """The stack ``data`` with the metadata :meth:`metadata` wrote (``where`` names the file)."""
         if not isinstance(info.get("geometry"), dict):
             raise ConfigError(f"{where}: no scan geometry in the metadata (a 'geometry' object); give the geometry "
-                              "separately (a scan file's 'geometry', docs/reconstruction.md)")
+                              "separately (a grid file's 'geometry', docs/reconstruction.md)")
         quantity = info.get("output", "path_length" if info.get("quantity") == "path length" else None)
         if quantity not in QUANTITIES:
             raise ConfigError(f"{where}: the metadata's 'output' {quantity!r} is not one of {', '.join(QUANTITIES)}")

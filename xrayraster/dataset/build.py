@@ -153,7 +153,7 @@ def build_sample(dataset: DatasetFile, root, index: int, threads: int | None = N
     stored = LAYOUTS[dataset.layout].write_sample(
         Path(root), index, dataclasses.replace(result, metadata=_steady(result.metadata)), record,
         name=dataset.name, projections=result.projections, write_meshes=meshes)
-    fractions = {names.get(k, "air" if k == "0" else k): v for k, v in stored["fractions"].items()}
+    fractions = {names.get(k, "background" if k == "0" else k): v for k, v in stored["fractions"].items()}
     return {"index": index, "seed": drawn.seed, "seconds": time.perf_counter() - start, "fractions": fractions}
 
 

@@ -29,13 +29,13 @@ from ..core import fields
 from ..core.choices import DATASET_KEEP, DATASET_LAYOUTS, DATASET_SPLITS
 from ..core.errors import ConfigError, GeometryError, WeaveError
 from ..core.validate import show
+from ..io.scan_file import SCAN_TABLES, ScanFile, load_scan_file
+from ..io.scan_keys import ANY, INDEX, KEYS, absolute_paths, check_key, set_key
 from ..io.scene_file import read_toml
-from ..pipeline.scan_file import TABLES, ScanFile, load_scan_file
-from ..pipeline.scan_keys import ANY, INDEX, KEYS, absolute_paths, check_key, set_key
 from .distributions import KINDS, Distribution, Fixed, distribution_from, is_distribution
 from .layouts import NAME_RULE, check_name
 
-__all__ = ["DatasetFile", "Draw", "differences", "draw", "fingerprint", "identity", "is_dataset_table",
+__all__ = ["DATASET_KEYS", "DatasetFile", "Draw", "differences", "draw", "fingerprint", "identity", "is_dataset_table",
            "load_dataset_file", "refuse_dataset_table"]
 
 #: Attempts at a sample before its draws are called impossible: a draw that a scan file cannot
@@ -43,7 +43,8 @@ __all__ = ["DatasetFile", "Draw", "differences", "draw", "fingerprint", "identit
 MAX_ATTEMPTS = 20
 #: Indices stay below 2**31, so the tags of the keys' streams (top bit set) never equal an attempt.
 MAX_COUNT = 2 ** 31
-_DATASET_KEYS = {"count", "seed", "layout", "splits", "name", "keep"}
+#: The keys of the ``[dataset]`` table.
+DATASET_KEYS = {"count", "seed", "layout", "splits", "name", "keep"}
 #: What only a dataset file holds: a scan (or scene) file with one of these is a dataset file.
 DATASET_ONLY = ("dataset", "vary", "base")
 _SPLIT_TOLERANCE = 1e-9
@@ -105,7 +106,7 @@ def load_dataset_file(source, *, base_dir=None) -> DatasetFile:
         # Absolute and normalised: the samples' metadata names the file, the same however it was spelt.
         path = Path(os.path.abspath(source))
         data, where, directory = read_toml(path, "dataset file"), str(path), path.parent
-    fields.only(data, {"base", "dataset", "vary", *TABLES}, where)
+    fields.only(data, {"base", "dataset", "vary", *SCAN_TABLES}, where)
     base = _base(data, directory, where, path)
     settings = fields.table(fields.required(data, "dataset", where), "dataset", where)
     dataset = DatasetFile(path, base, vary=_vary(fields.table(data.get("vary", {}), "vary", where), base, where),
@@ -180,7 +181,7 @@ def differences(a: DatasetFile | dict, b: DatasetFile | dict) -> list[str]:
 def _base(data: dict, directory: Path, where: str, own: Path | None) -> dict:
     """The base scan table: the file ``base`` names or the inline tables, its file paths made absolute.
     ``own``: the dataset file's path (None for a table), which ``base`` may not name."""
-    inline = {k: v for k, v in data.items() if k in TABLES}
+    inline = {k: v for k, v in data.items() if k in SCAN_TABLES}
     if "base" in data:
         if inline:
             raise ConfigError(f"{where}: give the base scan as base = \"scan.toml\" or as inline tables, not both "
@@ -191,7 +192,7 @@ def _base(data: dict, directory: Path, where: str, own: Path | None) -> dict:
             raise ConfigError(f"{where}: base = {show(data['base'])} names this dataset file itself; base names the "
                               "scan file every sample starts from (docs/scan.md), or give its tables inline")
         refuse_dataset_table(table, f"{where}: base = {show(data['base'])}", "a scan file (docs/scan.md)")
-        fields.only(table, TABLES, str(path))
+        fields.only(table, SCAN_TABLES, str(path))
         return absolute_paths(table, path.parent.absolute())
     if not inline:
         raise ConfigError(f"{where}: no base scan; add base = \"twin_small.toml\" (a scan file, relative to this "
@@ -216,7 +217,7 @@ def refuse_dataset_table(data, where: str, expected: str) -> None:
 
 def _settings(d: dict, path: Path | None, where: str) -> dict:
     """The ``[dataset]`` table's keys, checked, with their defaults."""
-    fields.only(d, _DATASET_KEYS, where)
+    fields.only(d, DATASET_KEYS, where)
     layout = d.get("layout", DATASET_LAYOUTS[0])
     if layout not in DATASET_LAYOUTS:
         raise ConfigError(f"{where}: layout must be one of {', '.join(DATASET_LAYOUTS)}, got {show(layout)}")

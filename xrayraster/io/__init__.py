@@ -1,5 +1,6 @@
-"""Files: TOML scene files, JSON scan files, TIFF stacks and their metadata, quick-look PNGs. The
-on-disk layouts of dataset builds are the dataset layer's (``xrayraster.dataset.layouts``)."""
+"""Files: configuration files by kind, a loader module each (TOML scene, scan and weave files, JSON grid
+files), TIFF stacks and their metadata, quick-look PNGs. Dataset files and the on-disk layouts of
+dataset builds are the dataset layer's (``xrayraster.dataset``)."""
 
 from .tiff import (
     read_projections,

@@ -56,7 +56,7 @@ class SceneFile:
 
 
 # The public key sets below are shared with the scan file's loader and its dotted keys
-# (xrayraster.pipeline.scan_file, xrayraster.pipeline.scan_keys).
+# (xrayraster.io.scan_file, xrayraster.io.scan_keys).
 
 #: The keys of an ``[[objects]]`` entry.
 OBJECT_KEYS = {"name", "mesh", "material", "label", "priority", "unit_scale", "translate", "rotate_deg"}

@@ -16,7 +16,6 @@ and a tube source, so ``xrayraster render`` and ``xrayraster voxelize`` take it 
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,7 +38,7 @@ from ..weave.spec import UnitCell
 from .scene_file import library_material, parse_materials, read_toml
 
 __all__ = [
-    "WeaveFile", "framing_geometry", "load_weave_file", "sample_grid", "weave_from_dict", "write_scan_file",
+    "WeaveFile", "framing_geometry", "load_weave_file", "sample_grid", "weave_from_dict",
     "write_scene_file",
 ]
 
@@ -206,8 +205,3 @@ def write_scene_file(path, report: dict, geometry: ConeBeamGeometry) -> Path:
     text = header + tomli_w.dumps(scene)
     return atomic_write_text(Path(path), text)
 
-
-def write_scan_file(path, volume: VolumeGeometry) -> Path:
-    """A scan file holding only the voxel grid (docs/reconstruction.md); written atomically."""
-    text = json.dumps({"volume": volume.to_dict()}, indent=2) + "\n"
-    return atomic_write_text(Path(path), text)

@@ -9,7 +9,7 @@ each sample's volume and labels as arrays that read only what is sliced (never a
   (our z), so a slice decompresses up to its last z plane and keeps only its planes.
 
 Arrays are indexed (z, y, x) as everywhere in xrayraster; the volume is float32 cm⁻¹, the labels
-uint8 (0 air, 1 matrix, 2 weft, 3 warp, 4 and up tracers: docs/dataset_layouts.md). Open files are
+uint8 (0 background, 1 matrix, 2 weft, 3 warp, 4 and up tracers: docs/dataset_layouts.md). Open files are
 kept per process (a PyTorch ``DataLoader`` worker opens its own), never pickled.
 """
 

@@ -7,9 +7,9 @@ import it. It runs without the command line (``xr.scan``, ``xr.weave``), which s
 top (``xrayraster scan``, ``xrayraster weave``).
 """
 
+from ..io.scan_file import ScanFile, ScanOptions, load_scan_file
 from .compare import Comparison, compare
 from .scan import ScanResult, check_scan_output, scan
-from .scan_file import ScanFile, ScanOptions, load_scan_file
 from .woven import WeaveResult, weave
 
 __all__ = [

@@ -103,7 +103,7 @@ class Comparison:
 
 
 def label_mask(labels: np.ndarray, classes=None, *, name: str = "the label volume") -> np.ndarray:
-    """Boolean mask of a label volume (``labels.tif`` of ``xrayraster scan``: 0 air, matrix 1,
+    """Boolean mask of a label volume (``labels.tif`` of ``xrayraster scan``: 0 background, matrix 1,
     weft 2, warp 3): the voxels of ``classes``, or every labelled (non-zero) voxel. ``name``
     is what an error calls the volume."""
     labels = np.asarray(labels)

@@ -15,10 +15,10 @@ from __future__ import annotations
 from ..core.errors import ConfigError
 from ..core.estimate import Estimate, Part
 from ..core.geometry import BYTES_PER_VIEW
+from ..io.scan_file import ScanFile
 from ..simulate.estimate import seconds_per_view
 from ..weave.size import SECONDS_PER_TRIANGLE as MESH_SECONDS_PER_TRIANGLE
 from ..weave.size import estimated_triangles, mesh_part
-from .scan_file import ScanFile
 
 SECONDS_PER_VOXEL_VIEW = 1.1e-9  # FDK: 119.5 s / (801 views × 512³ voxels)
 SECONDS_PER_VOXEL_LABEL = 1.4e-8  # labels: 1.4 s / 512³ (1.9 s in bench_voxelize)

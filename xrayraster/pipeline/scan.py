@@ -25,6 +25,7 @@ from ..core.provenance import package_version
 from ..core.tiff import quicklook_path
 from ..gl.context import GLContext
 from ..gl.voxelize import LabelVolume, voxelize
+from ..io.scan_file import ScanFile, load_scan_file
 from ..physics.detector import Detector
 from ..physics.starvation import refuse_if_starved, starved_share, warn_if_starved
 from ..recon.fdk import FDKStream, Volume
@@ -33,7 +34,6 @@ from ..recon.opencl import CLContext
 from ..simulate.renderer import Renderer
 from ..weave.yarn import LABELS as WEAVE_LABELS
 from .plan import check_scan
-from .scan_file import ScanFile, load_scan_file
 
 __all__ = ["ScanResult", "check_scan_output", "scan"]
 
@@ -255,7 +255,8 @@ def _version(name: str) -> str | None:
 
 
 def label_names(scene, *, woven: bool) -> dict[str, str]:
-    """Each label value of the label volume (as a string, JSON's key type) → its name: 0 "air"; a
+    """Each label value of the label volume (as a string, JSON's key type) → its name: 0 "background" (as nnU-Net
+    names it, and xr.ml and the dataset layouts; a mount is background too); a
     woven sample's families by name (1 matrix, 2 weft, 3 warp, whatever its yarns are called) and a
     tracer with a label of its own by its yarn's name; an object by its name (several objects
     sharing a label: their names joined by "+")."""
@@ -265,7 +266,7 @@ def label_names(scene, *, woven: bool) -> dict[str, str]:
         name = families.get(o.label, o.name)
         if name not in names.setdefault(o.label, []):
             names[o.label].append(name)
-    return {"0": "air", **{str(label): "+".join(names[label]) for label in sorted(names)}}
+    return {"0": "background", **{str(label): "+".join(names[label]) for label in sorted(names)}}
 
 
 def _objects_report(scene) -> dict:

@@ -18,21 +18,24 @@ from ..core.files import atomic_directory
 from ..core.geometry import ConeBeamGeometry
 from ..core.transform import Transform
 from ..core.volume import VolumeGeometry
-from ..io.weave_file import WeaveFile, framing_geometry, load_weave_file, sample_grid, write_scan_file, write_scene_file
+from ..io.grid_file import write_grid_file
+from ..io.weave_file import WeaveFile, framing_geometry, load_weave_file, sample_grid, write_scene_file
 from ..scene.scene import Scene
 from ..weave.export import GENERATOR, REPORT_NAME, Part, write_parts, write_report
 from ..weave.sample import Sample
 
-__all__ = ["SCAN_NAME", "SCENE_NAME", "WeaveResult", "output_directory", "weave"]
+__all__ = ["GRID_NAME", "SCENE_NAME", "WeaveResult", "output_directory", "weave"]
 
-SCENE_NAME, SCAN_NAME = "scene.toml", "scan.json"
+# An export before the grid file was named wrote its grid as scan.json: its report.json lists it,
+# so a new export over it removes it (core/files.atomic_directory).
+SCENE_NAME, GRID_NAME = "scene.toml", "grid.json"
 
 
 @dataclass(frozen=True)
 class WeaveResult:
     """A generated sample: ``parts`` (one mesh file each), the ``report`` that ``report.json``
     stores, the scan ``geometry`` of its scene file (a full circle that frames the sample) and the
-    voxel ``grid`` of its ``scan.json`` (the sample's box at the scan's magnified pixel pitch)."""
+    voxel ``grid`` of its ``grid.json`` (the sample's box at the scan's magnified pixel pitch)."""
 
     sample: Sample
     parts: list[Part]
@@ -59,13 +62,13 @@ class WeaveResult:
         return Path(directory)
 
     def write(self, directory) -> None:
-        """The mesh files, ``report.json``, ``scene.toml`` and ``scan.json``, each written atomically,
+        """The mesh files, ``report.json``, ``scene.toml`` and ``grid.json``, each written atomically,
         into an existing ``directory``."""
         directory = Path(directory)
         write_parts(self.parts, directory, self.report["format"])
         write_report(self.report, directory)
         write_scene_file(directory / SCENE_NAME, self.report, self.geometry)
-        write_scan_file(directory / SCAN_NAME, self.grid)
+        write_grid_file(directory / GRID_NAME, self.grid)
 
 
 @contextmanager
@@ -76,7 +79,7 @@ def output_directory(path, *, overwrite: bool = False):
     command line refuses before any work; ``overwrite`` replaces the earlier export's files and
     keeps every other entry."""
     with atomic_directory(path, marker=REPORT_NAME, generator=GENERATOR, overwrite=overwrite,
-                          names=(REPORT_NAME, SCENE_NAME, SCAN_NAME)) as tmp:
+                          names=(REPORT_NAME, SCENE_NAME, GRID_NAME)) as tmp:
         yield tmp
 
 

@@ -23,11 +23,11 @@ from ..core import fields
 from ..core.choices import RADIOGRAPH_OUTPUTS
 from ..core.errors import ConfigError
 from ..core.validate import show
+from ..dataset.dataset_file import refuse_dataset_table
+from ..io.scan_file import load_scan_file
+from ..io.scan_keys import INDEX, PATH_KEYS, absolute_paths, check_key, set_key
 from ..io.scene_file import load_scene_file, read_toml
 from ..io.weave_file import DEFAULT_SOURCE
-from ..dataset.dataset_file import refuse_dataset_table
-from ..pipeline.scan_file import load_scan_file
-from ..pipeline.scan_keys import INDEX, PATH_KEYS, absolute_paths, check_key, set_key
 
 #: Tables only a scan file has: a file with none of them is a scene file (``xrayraster render``'s).
 SCAN_TABLES = {"weave", "volume", "scan", "pose", "mount"}
@@ -88,7 +88,7 @@ class Document:
     @classmethod
     def open(cls, path) -> "Document":
         path = Path(path)
-        data = read_toml(path, "preview file")
+        data = read_toml(path, "scene, scan or weave file")
         refuse_dataset_table(data, str(path), "a scene, scan or weave file")
         if "weave" in data and set(data) <= {"weave", "materials"}:
             # A weave file is a scan file without a tube: the scan of `xrayraster weave`'s scene file

@@ -17,8 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.errors import ConfigError
+from ..io.scan_file import load_scan_file
 from ..pipeline.scan import scan
-from ..pipeline.scan_file import load_scan_file
 from .document import Document, View
 
 VIEWS = 90

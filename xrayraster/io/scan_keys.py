@@ -15,7 +15,12 @@ from pathlib import Path
 
 from ..core.errors import ConfigError
 from ..core.geometry import SCAN_KEYS
-from ..io.scene_file import (
+from ..core.volume import VolumeGeometry
+from ..weave.distort import Distortion
+from ..weave.spec import Section, UnitCell
+from .pose import POSE_KEYS
+from .scan_file import SCAN_TABLES, ScanOptions
+from .scene_file import (
     DETECTOR_KEYS,
     MATERIAL_KEYS,
     OBJECT_KEYS,
@@ -23,14 +28,9 @@ from ..io.scene_file import (
     SOURCE_KINDS,
     SOURCE_REALISM_KEYS,
 )
-from ..io.weave_file import SAMPLE_TABLE_KEYS
-from ..core.volume import VolumeGeometry
-from ..weave.distort import Distortion
-from ..weave.spec import Section, UnitCell
-from .pose import POSE_KEYS
-from .scan_file import TABLES, ScanOptions
+from .weave_file import SAMPLE_TABLE_KEYS
 
-__all__ = ["absolute_paths", "check_key", "set_key"]
+__all__ = ["ANY", "INDEX", "KEYS", "PATH_KEYS", "absolute_paths", "check_key", "set_key"]
 
 ANY = "*"  # any name: a material, a filter's material, an element
 INDEX = "#"  # an entry of an array of tables, by its index from 0
@@ -70,7 +70,7 @@ def check_key(key: str, base: dict, where: str) -> None:
     tables, or of values as the last part: ``pose.tilt_deg.2``), and no part below a plain value
     of the base."""
     parts = key.split(".")
-    tree, table = {**KEYS, **dict.fromkeys(TABLES - set(KEYS), ANY)}, base
+    tree, table = {**KEYS, **dict.fromkeys(SCAN_TABLES - set(KEYS), ANY)}, base
     for i, part in enumerate(parts):
         above = ".".join(parts[:i]) or "the scan file"
         if tree is None and isinstance(table, list) and i == len(parts) - 1:

@@ -22,7 +22,7 @@ from ..core.errors import ConfigError
 from ..core.transform import Transform
 from ..scene.scene import Scene
 
-__all__ = ["Pose"]
+__all__ = ["POSE_KEYS", "Pose"]
 
 #: The keys of the ``[pose]`` table.
 POSE_KEYS = {"offset_mm", "tilt_deg"}
