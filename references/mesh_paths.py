@@ -1,7 +1,7 @@
 """float64 path lengths inside closed triangle meshes along a circular cone-beam view's pixel rays,
 written from the geometry's definition (docs/geometry.md) apart from the renderer: the exact
 projections scripts/bench_scan.py scores both pipelines against, checked on a box by
-tests/test_bench_scan_reference.py."""
+tests/scripts/test_bench_scan_reference.py."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """TexGen (``pytexgen`` on PyPI, GPL-2.0-or-later) as an independent peer of ``xrayraster.weave``:
-the weave benchmark (scripts/bench_weave.py) compares with it, tests/test_texgen_peer.py checks it.
+the weave benchmark (scripts/bench_weave.py) compares with it, tests/references/test_texgen_peer.py checks it.
 
 TexGen is the textile modeller users of layer-to-layer weaves have; this module builds the same
 layer-to-layer angle interlock as ``xrayraster.weave.Sample(cell, cells=(nx, ny))`` with TexGen's

@@ -207,7 +207,7 @@ def run_peer(loaded, max_edge_mm: float) -> dict:
 def self_check() -> float:
     """Largest difference (mm) between ``references.mesh_paths.exact_path_lengths`` and
     ``references.chords.box_chord`` for an off-centre box (its 12 triangles) at three angles, every
-    pixel of a 64 × 48 detector (tests/test_bench_scan_reference.py checks the same)."""
+    pixel of a 64 × 48 detector (tests/scripts/test_bench_scan_reference.py checks the same)."""
     import trimesh
 
     from references.chords import box_chord, cone_rays

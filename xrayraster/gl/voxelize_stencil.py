@@ -8,7 +8,7 @@ object's label wherever the count is not zero. Which pixels a triangle covers is
 rasteriser's decision (coverage of snapped vertices), so columns that graze a silhouette can
 gain or lose a crossing; every slice draws every triangle that reaches above it. The exact
 crossing sweep of :mod:`xrayraster.gl.voxelize` avoids both; this module exists to measure the
-difference (scripts/bench_voxelize.py, tests/test_voxelize.py).
+difference (scripts/bench_voxelize.py, tests/gl/test_voxelize.py).
 
 moderngl has no stencil API, so the few stencil calls go to the driver directly.
 """

@@ -50,7 +50,7 @@ def attenuation_table(materials, energies_kev) -> np.ndarray:
 
 # Energy bins whose combined share of the open-beam signal is at most this are dropped. Behind
 # an object the share can differ (hard bins gain weight behind thick material), so the error is
-# measured where it matters (tests/test_radiograph.py): 80 kVp W + 2 mm Al, CsI 0.5 mm, 0-60 mm
+# measured where it matters (tests/physics/test_radiograph.py): 80 kVp W + 2 mm Al, CsI 0.5 mm, 0-60 mm
 # of aluminium: 20 of 158 bins dropped, transmission within 2.2e-7 relative of all bins.
 BIN_TOLERANCE = 1e-6
 

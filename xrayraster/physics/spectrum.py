@@ -386,7 +386,7 @@ class Spectrum:
 # anode, angle and bin width; 0.3-0.5 s) in Spek(), and scales it by mAs only when the spectrum is
 # read, so a model is kept per tube and filtration and only its mAs is set anew: a dataset that
 # draws the exposure but keeps the tube, or a preview changing the mAs, pays for the model once.
-# The spectrum is the same, bit for bit, as a new Spek's (tests/test_spectrum.py).
+# The spectrum is the same, bit for bit, as a new Spek's (tests/physics/test_spectrum.py).
 _TUBE_LOCK = threading.Lock()
 
 
