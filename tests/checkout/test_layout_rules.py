@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import ast
 import re
+import tomllib
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -96,3 +97,14 @@ def test_every_checkout_path_that_ci_and_the_docs_name_exists():
                 if not any(ROOT.glob(path)):
                     missing.append(f"{source.relative_to(ROOT)}:{n}: {path}")
     assert named > 100 and not missing, "named paths that do not exist:\n" + "\n".join(missing)
+
+
+def test_the_layer_table_of_the_docs_is_the_contract():
+    """docs/architecture.md's layer table and the layers contract of pyproject.toml name the same
+    layers in the same order, so neither is changed without the other."""
+    contract = next(c for c in tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["importlinter"]["contracts"]
+                    if c["type"] == "layers")
+    layers = [{name.strip() for name in layer.split("|")} for layer in contract["layers"]]
+    rows = re.findall(r"^\| (\d+) \| (.+?) \|", (ROOT / "docs" / "architecture.md").read_text(), re.M)
+    table = [set(re.findall(r"`(\w+)`", cell)) for _, cell in sorted(rows, key=lambda r: -int(r[0]))]
+    assert table == layers

@@ -19,9 +19,9 @@ import trimesh
 import xrayraster as xr
 from xrayraster.core.estimate import Estimate, Part, duration_text
 from xrayraster.io.weave_file import load_weave_file
-from xrayraster.pipeline.plan import scan_estimate
+from xrayraster.pipeline.plan import ScanJob
 from xrayraster.io.scan_file import load_scan_file
-from xrayraster.simulate.estimate import render_estimate
+from xrayraster.simulate.estimate import RenderJob
 from xrayraster.weave.size import estimated_triangles
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -89,7 +89,7 @@ def test_a_long_scan_prints_its_estimate_before_work(tmp_path):
     path = tmp_path / "scan.toml"
     path.write_text(SCAN_SMALL.replace("num_views = 90 ", "num_views = 20000 ")
                     .replace("shape = [24, 64, 64]", "shape = [256, 256, 256]"))
-    estimate = scan_estimate(load_scan_file(path), 32)
+    estimate = ScanJob(load_scan_file(path), 32).estimate()
     assert estimate.long and estimate.bytes < 2**30
     assert {p.key for p in estimate.parts} >= {"[geometry] num_views = 20000", "[volume] shape = [256, 256, 256]"}
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
@@ -122,7 +122,7 @@ def test_render_refuses_a_stack_that_cannot_fit_and_estimates_a_long_one(tmp_pat
     proc, seconds = _run(["render", str(path), "-o", str(tmp_path / "p.tif"), "--views", "all"], tmp_path)
     line = _one_error_line(proc)
     assert "views = 5760 of 2048×2048 pixels" in line and "GiB" in line and "--views" in line
-    long = render_estimate(5000, (1024, 1024), 10**6)
+    long = RenderJob(5000, (1024, 1024), 10**6).estimate()
     assert long.long and "rendering of 5000 views" in long.line()
 
     monkeypatch.setattr(xr.core.memory, "available_memory", lambda: 64 << 20)

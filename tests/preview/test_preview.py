@@ -10,6 +10,7 @@ XRAYRASTER_PREVIEW_SCREENSHOT=PATH also saves the page as the browser test leave
 from __future__ import annotations
 
 import json
+import math
 import os
 import shutil
 import socket
@@ -118,11 +119,40 @@ def test_edits_are_checked_by_the_files_own_loader(scene_file):
     ({"output": "sinogram"}, "output must be one of raw, transmission, lineint, path_length"),
     ({"angle_deg": "north"}, "angle_deg must be a number"),
     ({"seed": -1}, "seed must be an integer >= 0"),
-    ({"zoom": 2}, "unknown field"),
+    ({"zoom": 2}, r"view: unknown key\(s\) zoom; allowed: angle_deg, material, noise, output, seed"),
 ])
 def test_bad_views_are_named(view, message):
     with pytest.raises(ConfigError, match=message):
         View.from_dict(view)
+
+
+@pytest.mark.parametrize("edits", [
+    {"geometry.num_views": None, "geometry.angles_deg": [10.0, 17.5, 100.0, -33.25, 10.0 + 1e-9]},
+    {"geometry.start_angle_deg": 5.0, "geometry.arc_deg": 200.0},
+])
+def test_a_saved_file_and_a_frame_turn_the_views_alike(scene_file, tmp_path, edits):
+    """The angles of a saved file's views (degrees in the file) are the frame's turned geometry's
+    (radians), to float64 rounding; and both keep the file's spacing with the first at the asked angle."""
+    import tomli_w
+
+    document = Document.open(scene_file).edited(edits)
+    own = np.array(document.load().geometry.angles)
+    for angle in (47.5, -120.25, 0.0):
+        table = document.saved(View(angle_deg=angle))
+        if "geometry.angles_deg" in edits:
+            degrees = table["geometry"]["angles_deg"]
+            assert degrees[0] == angle  # exactly the asked angle, as the page shows it
+            np.testing.assert_allclose(np.diff(degrees), np.diff(edits["geometry.angles_deg"]), rtol=0, atol=1e-12)
+        else:
+            assert table["geometry"]["start_angle_deg"] == angle
+        path = tmp_path / "saved.toml"
+        path.write_text(tomli_w.dumps(table))
+        from_file = np.array(load_scene_file(path).geometry.angles)
+        on_screen = np.array(turned(document.load().geometry, angle).angles)
+        assert on_screen[0] == math.radians(angle) and from_file[0] == pytest.approx(math.radians(angle), rel=0, abs=1e-15)
+        for angles in (from_file, on_screen):  # the spacing of the file's own views is kept
+            np.testing.assert_allclose(np.diff(angles), np.diff(own), rtol=0, atol=1e-13)
+        np.testing.assert_allclose(from_file, on_screen, rtol=0, atol=1e-13)
 
 
 def test_a_weave_file_previews_as_the_scan_file_it_saves_as(tmp_path, previewer):

@@ -188,10 +188,20 @@ def test_saved_settings_are_checked_as_frames_are(scene_file, edits):
 
 
 @pytest.mark.parametrize("view, field", [({"noise": "yes"}, "noise"), ({"noise": 1}, "noise"),
-                                         ({"noise": None}, "noise"), ({"angle_deg": True}, "angle_deg")])
+                                         ({"noise": None}, "noise"), ({"angle_deg": True}, "angle_deg"),
+                                         ({"output": 3}, "output"), ({"output": ["lineint"]}, "output"),
+                                         ({"seed": 1.5}, "seed"), ({"material": "0"}, "material"),
+                                         ({"angle_deg": "12"}, "angle_deg")])
 def test_a_views_fields_have_their_json_types(view, field):
-    with pytest.raises(ConfigError, match=f"view: {field} must be"):
+    with pytest.raises(ConfigError, match=f"view: {field} must be") as error:
         View.from_dict(view)
+    assert "\n" not in str(error.value)
+
+
+def test_a_views_unknown_fields_are_named_with_the_ones_it_takes():
+    with pytest.raises(ConfigError, match=r"^view: unknown key\(s\) tilt, zoom; allowed: angle_deg, material, "
+                                          r"noise, output, seed$"):
+        View.from_dict({"zoom": 2, "tilt": 1.0, "seed": 3})
 
 
 def test_a_binary_message_is_answered_and_the_server_keeps_serving(scene_file, gl):

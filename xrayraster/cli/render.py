@@ -8,12 +8,13 @@ from pathlib import Path
 
 from ..core.choices import OVERLAP_MODES, RADIOGRAPH_OUTPUTS
 from ..core.errors import ConfigError
+from ..core.estimate import plan
 from ..core.projections import Projections
 from ..core.tiff import quicklook_path
 from ..io.scene_file import load_scene_file
 from ..physics.detector import Detector
 from ..physics.starvation import starved_share, warn_if_starved
-from ..simulate.estimate import render_estimate
+from ..simulate.estimate import RenderJob
 from ..simulate.renderer import Renderer
 from .options import nonnegative_int, positive_int
 from .outputs import check_outputs
@@ -72,9 +73,8 @@ def _render_path_lengths(args) -> int:
 
 def _planned(views: list[int], geometry, scene, channels: int, supersampling: int) -> None:
     """Refuse a stack that cannot fit in memory and print the estimate of a long render, before the GL starts."""
-    estimate = render_estimate(len(views), geometry.detector_shape, scene.num_triangles, channels, supersampling)
-    estimate.check(ConfigError)
-    estimate.announce()
+    plan(RenderJob(len(views), geometry.detector_shape, scene.num_triangles, channels, supersampling), ConfigError,
+         announce=True)
 
 
 def _render_radiographs(args) -> int:

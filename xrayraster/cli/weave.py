@@ -15,9 +15,11 @@ import time
 from pathlib import Path
 
 from ..core.choices import EXPORT_PER, MESH_FORMATS, WEAVE_RESOLVE
+from ..core.errors import WeaveError
+from ..core.estimate import plan
 from ..io.weave_file import load_weave_file
 from ..pipeline.woven import GRID_NAME, SCENE_NAME, output_directory, weave
-from ..weave.size import weave_estimate
+from ..weave.size import WeaveJob
 
 
 def add_parser(subparsers) -> None:
@@ -40,7 +42,9 @@ def add_parser(subparsers) -> None:
 
 def run(args) -> int:
     loaded = load_weave_file(args.weave)
-    weave_estimate(loaded.sample, args.resolve).announce()
+    # WeaveError: the refusal Sample.parts would give the same meshes later (the file's sizes were planned as it
+    # loaded, but --resolve boolean holds more).
+    plan(WeaveJob(loaded.sample, args.resolve), WeaveError, announce=True)
     start = time.perf_counter()
     # Entered first: an output it may not replace is refused before any work.
     with output_directory(args.out, overwrite=args.force) as tmp:

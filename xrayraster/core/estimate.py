@@ -1,9 +1,11 @@
 """Up-front plans of long jobs: their time and memory, estimated before any work.
 
-A stage that can run for long (a scan, ``render --views all``, a woven sample's meshes) makes an
-:class:`Estimate` from the sizes that matter, refuses what cannot fit in memory
-(:meth:`Estimate.check`, one line naming the key to change) and prints the estimate when it is
-long (:meth:`Estimate.announce`). The rates behind the times are measured on the development
+A stage that can run for long (a scan, ``render --views all``, a woven sample's meshes, a tube
+spectrum's bins) describes it as a job (:class:`Planned`: a small frozen dataclass of the sizes that
+matter, in the stage's own module) whose :meth:`~Planned.estimate` is an :class:`Estimate`, and
+passes it through the one gate, :func:`plan`: it refuses what cannot fit in memory
+(:meth:`Estimate.check`, one line naming the key to change) and prints the estimate of a long job
+when asked (:meth:`Estimate.announce`). The rates behind the times are measured on the development
 machine (2 slow cores, llvmpipe, PoCL) and only claim the right order of magnitude.
 """
 
@@ -11,6 +13,7 @@ from __future__ import annotations
 
 import sys
 from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
 
 from .memory import check_fits, size_text
 
@@ -65,6 +68,27 @@ class Estimate:
         """Print :meth:`line` on ``stream`` (default stderr) when the job is :attr:`long`."""
         if self.long:
             print(self.line(), file=stream or sys.stderr, flush=True)
+
+
+@runtime_checkable
+class Planned(Protocol):
+    """A job described by its sizes alone, before any work: what :func:`plan` estimates and gates."""
+
+    def estimate(self) -> Estimate:
+        """The job's time and memory, from its sizes alone (no meshing, rendering or allocation)."""
+        ...
+
+
+def plan(job: Planned, error: type[Exception], where: str = "", *, announce: bool = False) -> Estimate:
+    """The gate every stage passes a job through before its work: ``job``'s :class:`Estimate`,
+    refused with ``error`` when it cannot fit in memory (:meth:`Estimate.check`; ``where`` prefixes
+    the key, e.g. the file's path and a space) and, with ``announce``, printed on stderr when long
+    (:meth:`Estimate.announce`). Returns the estimate."""
+    estimate = job.estimate()
+    estimate.check(error, where)
+    if announce:
+        estimate.announce()
+    return estimate
 
 
 def duration_text(seconds: float) -> str:

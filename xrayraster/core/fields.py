@@ -48,6 +48,20 @@ def string(value, field: str, where: str) -> str:
     return value
 
 
+def boolean(value, field: str, where: str) -> bool:
+    """A TOML or JSON boolean: not 1 or 0, which equal True and False, nor a string."""
+    if not isinstance(value, bool):
+        raise ConfigError(f"{where}: {field} must be true or false, got {show(value)}")
+    return value
+
+
+def choice(value, field: str, where: str, choices: tuple[str, ...]) -> str:
+    """One of the strings ``choices`` (a tuple of :mod:`~xrayraster.core.choices`)."""
+    if not isinstance(value, str) or value not in choices:
+        raise ConfigError(f"{where}: {field} must be one of {', '.join(choices)}, got {show(value)}")
+    return value
+
+
 def table(value, field: str, where: str) -> dict:
     if not isinstance(value, dict):
         raise ConfigError(f"{where}: {field} must be a table ([{field}]), got {show(value)}")

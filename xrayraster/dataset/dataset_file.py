@@ -218,9 +218,7 @@ def refuse_dataset_table(data, where: str, expected: str) -> None:
 def _settings(d: dict, path: Path | None, where: str) -> dict:
     """The ``[dataset]`` table's keys, checked, with their defaults."""
     fields.only(d, DATASET_KEYS, where)
-    layout = d.get("layout", DATASET_LAYOUTS[0])
-    if layout not in DATASET_LAYOUTS:
-        raise ConfigError(f"{where}: layout must be one of {', '.join(DATASET_LAYOUTS)}, got {show(layout)}")
+    layout = fields.choice(d.get("layout", DATASET_LAYOUTS[0]), "layout", where, DATASET_LAYOUTS)
     return {"count": fields.integer(fields.required(d, "count", where), "count", where, 1, MAX_COUNT),
             "seed": fields.integer(fields.required(d, "seed", where), "seed", where, 0),
             "layout": layout, "splits": _splits(d.get("splits", {"train": 1.0}), where), "name": _name(d, path, where),

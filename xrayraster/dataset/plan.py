@@ -1,5 +1,5 @@
 """The plan of a dataset build (``xrayraster build --plan``): every sample's draw and its predicted
-time and disk use, from the scan plan (:func:`~xrayraster.pipeline.plan.scan_estimate`), no scan run.
+time and disk use, from the scan plan (:class:`~xrayraster.pipeline.plan.ScanJob`), no scan run.
 
 A draw costs about 0.4 s (most of it the tube spectrum), so a plan is streamed, a line a sample as
 it is drawn (:func:`plan_lines`), and a plan of more than :data:`PLAN_DRAWS` samples draws only the
@@ -13,7 +13,9 @@ from __future__ import annotations
 import json
 from collections.abc import Iterator
 
-from ..pipeline.plan import check_scan
+from ..core.errors import ConfigError
+from ..core.estimate import plan
+from ..pipeline.plan import ScanJob
 from ..pipeline.scan import BATCH_VIEWS
 from .dataset_file import DatasetFile, draw
 
@@ -31,7 +33,7 @@ def check_sample(scan_file):
     """The scan plan (:class:`~xrayraster.core.estimate.Estimate`) of a drawn sample, refused as
     ``xr.scan`` would refuse it, before any work: ConfigError naming the key, when its scan cannot
     fit in the memory available."""
-    return check_scan(scan_file, BATCH_VIEWS)
+    return plan(ScanJob(scan_file, BATCH_VIEWS), ConfigError, f"{scan_file.path} ")
 
 
 def plan_rows(dataset: DatasetFile, indices=None) -> list[dict]:

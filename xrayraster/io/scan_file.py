@@ -29,6 +29,7 @@ import numpy as np
 from ..core import fields
 from ..core.choices import FILTERS, is_switch
 from ..core.errors import ConfigError
+from ..core.estimate import plan
 from ..core.geometry import ConeBeamGeometry, ParallelBeamGeometry
 from ..core.transform import Transform
 from ..core.volume import VolumeGeometry
@@ -38,7 +39,7 @@ from ..physics.spectrum import Spectrum
 from ..recon.truncation import DEFAULT_WIDTH
 from ..scene.materials import Material
 from ..scene.scene import Scene
-from ..weave.size import bend_search_estimate
+from ..weave.size import BendSearch
 from ..weave.tessellation import resolution_for
 from .pose import Pose
 from .scene_file import (
@@ -88,9 +89,7 @@ class ScanOptions:
             options["mesh_tolerance_voxels"] = fields.number(d["mesh_tolerance_voxels"], "mesh_tolerance_voxels",
                                                              where, positive=True)
         if "noise" in d:
-            if not isinstance(d["noise"], bool):
-                raise ConfigError(f"{where}: noise must be true or false, got {d['noise']!r}")
-            options["noise"] = d["noise"]
+            options["noise"] = fields.boolean(d["noise"], "noise", where)
         if "truncation" in d:
             if not is_switch(d["truncation"]):
                 raise ConfigError(f"{where}: truncation must be \"auto\", true or false, got {d['truncation']!r}")
@@ -101,9 +100,7 @@ class ScanOptions:
                 raise ConfigError(f"{where}: truncation_width must be at most 4 (a share of the detector width), "
                                   f"got {d['truncation_width']!r}")
         if "filter" in d:
-            options["filter"] = fields.string(d["filter"], "filter", where)
-            if options["filter"] not in FILTERS:
-                raise ConfigError(f"{where}: filter must be one of {', '.join(FILTERS)}, got {d['filter']!r}")
+            options["filter"] = fields.choice(d["filter"], "filter", where, FILTERS)
         return cls(**options)
 
     def to_dict(self) -> dict:
@@ -241,7 +238,7 @@ def mesh_resolution_for(weave: WeaveFile, volume: VolumeGeometry, tolerance_voxe
     tolerance = tolerance_voxels * float(min(volume.voxel_size))
     knobs = {"points_per_section": sample.points_per_section, "samples_per_mm": sample.samples_per_mm}
     if not all(given.values()):  # the search for the tightest bend grows with the binders' columns: planned first
-        bend_search_estimate(sample).check(ConfigError, f"{weave.path} ")
+        plan(BendSearch(sample), ConfigError, f"{weave.path} ")
         k, rate = resolution_for(sample.cell, tolerance)
         knobs = {"points_per_section": knobs["points_per_section"] if given["points_per_section"] else k,
                  "samples_per_mm": knobs["samples_per_mm"] if given["samples_per_mm"] else rate}

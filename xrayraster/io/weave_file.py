@@ -25,6 +25,7 @@ import tomli_w
 
 from ..core import fields
 from ..core.errors import ConfigError, WeaveError
+from ..core.estimate import plan
 from ..core.files import atomic_write_text
 from ..core.geometry import ConeBeamGeometry
 from ..core.volume import VolumeGeometry
@@ -33,7 +34,7 @@ from ..scene.materials import Material
 from ..weave.distort import Distortion
 from ..weave.materials import FibreBundle, Tracer, YarnMaterials
 from ..weave.sample import Sample
-from ..weave.size import Size, weave_estimate
+from ..weave.size import Size, WeaveJob
 from ..weave.spec import UnitCell
 from .scene_file import library_material, parse_materials, read_toml
 
@@ -74,7 +75,7 @@ def load_weave_file(source) -> WeaveFile:
         raise ConfigError(f"{where}: missing [weave] table (the unit cell; every key may be left at its default)")
     materials = parse_materials(data["materials"], f"{where} [materials]") if "materials" in data else {}
     sample, yarn_materials = weave_from_dict(data["weave"], materials, f"{where} [weave]")
-    weave_estimate(sample, tables=True).check(ConfigError, f"{where} ")
+    plan(WeaveJob(sample, tables=True), ConfigError, f"{where} ")
     return WeaveFile(path, sample, yarn_materials)
 
 
@@ -120,7 +121,7 @@ def _check_size(cell: dict, sample: dict, grid_chooses_knobs: bool, file: str) -
         size = Size.planned(cell, sample)
         knobs = {"points_per_section": 8, "samples_per_mm": 1.0 / (size.weft_per_layer * size.weft_spacing)}
     size = Size.planned(cell, {**knobs, **sample})
-    weave_estimate(size, export=False, tables=True).check(ConfigError, file)
+    plan(WeaveJob(size, export=False, tables=True), ConfigError, file)
 
 
 def _yarn_materials(d: dict, materials: dict[str, Material], where: str) -> YarnMaterials:

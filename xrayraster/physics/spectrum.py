@@ -31,12 +31,16 @@ import threading
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..core.errors import SpectrumError
 from ..core.files import atomic_write_text
 from ..core.inputs import read_text_file
+
+if TYPE_CHECKING:
+    from ..core.estimate import Estimate
 
 __all__ = ["REFERENCE_DISTANCE_MM", "SPEKPY_ANODES", "Spectrum", "SpectrumError"]
 
@@ -53,14 +57,23 @@ MAX_KVP = 1000.0
 SECONDS_PER_SPEKPY_BIN = 3.5e-4
 
 
-def _plan_bins(kvp: float, bin_kev: float) -> None:
-    """Refuse, before SpekPy runs, a bin width that makes more energy bins than memory holds."""
-    from ..core.estimate import Estimate, Part  # the spectrum module stays light to import
+@dataclass(frozen=True)
+class SpectrumJob:
+    """SpekPy's tube spectrum of ``kvp`` kV in bins ``bin_kev`` keV wide, before SpekPy runs: a
+    :class:`~xrayraster.core.estimate.Planned` job (a bin width that makes more energy bins than
+    memory holds is refused)."""
 
-    bins = math.ceil(kvp / bin_kev)
-    part = Part(f"{bins} energy bins", bins * BYTES_PER_SPEKPY_BIN, f"bin_kev = {bin_kev:g}",
-                "use wider energy bins (bin_kev, default 0.5 keV)")
-    Estimate(f"tube spectrum of {kvp:g} kV", bins * SECONDS_PER_SPEKPY_BIN, (part,)).check(SpectrumError)
+    kvp: float
+    bin_kev: float
+
+    def estimate(self) -> Estimate:
+        from ..core.estimate import Estimate, Part  # the spectrum module stays light to import
+
+        kvp, bin_kev = self.kvp, self.bin_kev
+        bins = math.ceil(kvp / bin_kev)
+        part = Part(f"{bins} energy bins", bins * BYTES_PER_SPEKPY_BIN, f"bin_kev = {bin_kev:g}",
+                    "use wider energy bins (bin_kev, default 0.5 keV)")
+        return Estimate(f"tube spectrum of {kvp:g} kV", bins * SECONDS_PER_SPEKPY_BIN, (part,))
 
 
 def _finite_number(name: str, value) -> float:
@@ -237,7 +250,9 @@ class Spectrum:
         dk = _finite_number("bin_kev", bin_kev)
         if dk <= 0 or dk >= kvp:
             raise SpectrumError(f"bin_kev must be > 0 keV and below kvp ({kvp:g}), got {bin_kev!r}")
-        _plan_bins(kvp, dk)
+        from ..core.estimate import plan  # the spectrum module stays light to import
+
+        plan(SpectrumJob(kvp, dk), SpectrumError)
         if filters is None:
             filters = {}
         if not isinstance(filters, Mapping):

@@ -1,18 +1,22 @@
-"""A scan's up-front plan: its time and memory from the scan file alone, before the sample is meshed.
+"""A scan's up-front plan (:class:`ScanJob`): its time and memory from the scan file alone, before
+the sample is meshed; stages pass it through :func:`~xrayraster.core.estimate.plan`, the key in a
+refusal after the file's path.
 
 Memory: the parts that grow with the file's keys (:class:`~xrayraster.core.estimate.Part`): the
 views' geometry, the sample's meshes (a weave's triangles estimated from every key that multiplies
 them: its yarns a cell, spacings, cells and mesh knobs, :mod:`~xrayraster.weave.size`), one batch of
 projections and of filtered views, the volume and the labels. A preview's frame
-(:func:`frame_estimate`) is the same sample and one view. Time: the sample's meshing, the
+(:class:`FrameJob`) is the same sample and one view. Time: the sample's meshing, the
 projections (:mod:`~xrayraster.simulate.estimate`), the FDK's backprojection (per voxel and view)
-and the labels (per voxel). The FDK's and the labels' rates come from the full twin on the development machine (801 views into 512³ voxels: FDK 119.5 s,
-labels 1.4 s, docs/twin.md) and are right to an order of magnitude.
+and the labels (per voxel). The FDK's and the labels' rates come from the full twin on the
+development machine (801 views into 512³ voxels: FDK 119.5 s, labels 1.4 s, docs/twin.md) and are
+right to an order of magnitude.
 """
 
 from __future__ import annotations
 
-from ..core.errors import ConfigError
+from dataclasses import dataclass
+
 from ..core.estimate import Estimate, Part
 from ..core.geometry import BYTES_PER_VIEW
 from ..io.scan_file import ScanFile
@@ -31,51 +35,51 @@ BYTES_PER_SCENE_TRIANGLE = 400
 BYTES_PER_BATCH_PIXEL = 4 + 3 * 8 + 2 * 4
 
 
-def scan_estimate(loaded: ScanFile, batch_views: int) -> Estimate:
-    """The plan of ``xr.scan(loaded)``, rendering and filtering ``batch_views`` views at a time."""
-    geometry, volume = loaded.geometry, loaded.volume
-    views, (rows, cols) = geometry.num_views, geometry.detector_shape
-    nz, ny, nx = volume.shape
-    voxels = nz * ny * nx
-    shape = f"[volume] shape = {list(volume.shape)}"
-    grid_fix = "use a coarser grid (shape, voxel_size) or a part of it (offset)"
-    sample, triangles, meshing = _sample_plan(loaded)
-    parts = (
-        Part("views' geometry", views * BYTES_PER_VIEW, f"[geometry] num_views = {views}", "use fewer views"),
-        *sample,
-        Part(f"a batch of {batch_views} views", min(views, batch_views) * rows * cols * BYTES_PER_BATCH_PIXEL,
-             f"[geometry] detector_shape = {[rows, cols]}", "use fewer detector pixels"),
-        Part("float32 volume", voxels * 4, shape, grid_fix),
-        Part("labels", voxels, shape, grid_fix),
-    )
-    seconds = (meshing + views * seconds_per_view(rows * cols, triangles)
-               + views * voxels * SECONDS_PER_VOXEL_VIEW + voxels * SECONDS_PER_VOXEL_LABEL)
-    return Estimate(f"scan of {views} views into {nz}×{ny}×{nx} voxels", seconds, parts)
+@dataclass(frozen=True)
+class ScanJob:
+    """``xr.scan(loaded)``, rendering and filtering ``batch_views`` views at a time: a
+    :class:`~xrayraster.core.estimate.Planned` job, sized from the scan file alone."""
+
+    loaded: ScanFile
+    batch_views: int
+
+    def estimate(self) -> Estimate:
+        loaded, batch_views = self.loaded, self.batch_views
+        geometry, volume = loaded.geometry, loaded.volume
+        views, (rows, cols) = geometry.num_views, geometry.detector_shape
+        nz, ny, nx = volume.shape
+        voxels = nz * ny * nx
+        shape = f"[volume] shape = {list(volume.shape)}"
+        grid_fix = "use a coarser grid (shape, voxel_size) or a part of it (offset)"
+        sample, triangles, meshing = _sample_plan(loaded)
+        parts = (
+            Part("views' geometry", views * BYTES_PER_VIEW, f"[geometry] num_views = {views}", "use fewer views"),
+            *sample,
+            Part(f"a batch of {batch_views} views", min(views, batch_views) * rows * cols * BYTES_PER_BATCH_PIXEL,
+                 f"[geometry] detector_shape = {[rows, cols]}", "use fewer detector pixels"),
+            Part("float32 volume", voxels * 4, shape, grid_fix),
+            Part("labels", voxels, shape, grid_fix),
+        )
+        seconds = (meshing + views * seconds_per_view(rows * cols, triangles)
+                   + views * voxels * SECONDS_PER_VOXEL_VIEW + voxels * SECONDS_PER_VOXEL_LABEL)
+        return Estimate(f"scan of {views} views into {nz}×{ny}×{nx} voxels", seconds, parts)
 
 
-def frame_estimate(loaded) -> Estimate:
-    """The plan of one view of a scan or scene file (``loaded``: a ScanFile or SceneFile), as the
-    preview renders it: the sample meshed (or the objects), and one view's pixels in flight."""
-    rows, cols = loaded.geometry.detector_shape
-    sample, triangles, meshing = _sample_plan(loaded)
-    view = Part(f"a view of {rows}×{cols} pixels", rows * cols * BYTES_PER_BATCH_PIXEL,
-                f"[geometry] detector_shape = {[rows, cols]}", "use fewer detector pixels")
-    return Estimate(f"frame of {rows}×{cols} pixels", meshing + seconds_per_view(rows * cols, triangles),
-                    (*sample, view))
+@dataclass(frozen=True)
+class FrameJob:
+    """One view of a scan or scene file (``loaded``: a ScanFile or SceneFile), as the preview renders
+    it: the sample meshed (or the objects), and one view's pixels in flight. A
+    :class:`~xrayraster.core.estimate.Planned` job."""
 
+    loaded: object
 
-def check_scan(loaded: ScanFile, batch_views: int) -> Estimate:
-    """:func:`scan_estimate`, refused (ConfigError naming the file, the table and the key) when it cannot fit."""
-    estimate = scan_estimate(loaded, batch_views)
-    estimate.check(ConfigError, f"{loaded.path} ")
-    return estimate
-
-
-def check_frame(loaded) -> Estimate:
-    """:func:`frame_estimate`, refused (ConfigError naming the file, the table and the key) when it cannot fit."""
-    estimate = frame_estimate(loaded)
-    estimate.check(ConfigError, f"{loaded.path} ")
-    return estimate
+    def estimate(self) -> Estimate:
+        rows, cols = self.loaded.geometry.detector_shape
+        sample, triangles, meshing = _sample_plan(self.loaded)
+        view = Part(f"a view of {rows}×{cols} pixels", rows * cols * BYTES_PER_BATCH_PIXEL,
+                    f"[geometry] detector_shape = {[rows, cols]}", "use fewer detector pixels")
+        return Estimate(f"frame of {rows}×{cols} pixels", meshing + seconds_per_view(rows * cols, triangles),
+                        (*sample, view))
 
 
 def _sample_plan(loaded) -> tuple[tuple[Part, ...], int, float]:

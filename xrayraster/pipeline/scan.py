@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.errors import ConfigError
+from ..core.estimate import plan
 from ..core.files import atomic_directory, atomic_write_text, check_output_directory
 from ..core.pictures import write_slices
 from ..core.projections import Projections
@@ -33,7 +35,7 @@ from ..recon.fdk_weights import footprint_radius
 from ..recon.opencl import CLContext
 from ..simulate.renderer import Renderer
 from ..weave.yarn import LABELS as WEAVE_LABELS
-from .plan import check_scan
+from .plan import ScanJob
 
 __all__ = ["ScanResult", "check_scan_output", "scan"]
 
@@ -111,15 +113,13 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False, a
     ``metadata["projections"]["starved_share"]`` records it.
 
     Before any work, a scan that cannot fit in memory is refused (ConfigError naming the key), and
-    with ``progress=True`` the estimate of a long one is printed on stderr (:mod:`.plan`).
+    with ``progress=True`` the estimate of a long one is printed on stderr (:class:`.plan.ScanJob`).
 
     ``gl``, ``cl``: contexts to reuse (a dataset worker keeps its own across samples: made once,
     they save their set-up and compiled kernels; each scan makes and closes its own otherwise).
     ``threads``: the spectral sum's thread count (default every core; a worker of a pool its share)."""
     loaded = scan_file_or_path if isinstance(scan_file_or_path, ScanFile) else load_scan_file(scan_file_or_path)
-    estimate = check_scan(loaded, BATCH_VIEWS)
-    if progress is True:
-        estimate.announce()
+    plan(ScanJob(loaded, BATCH_VIEWS), ConfigError, f"{loaded.path} ", announce=progress is True)
     options = loaded.options
     seconds = dict.fromkeys(STAGES, 0.0)  # projections and fdk take turns, so each is a sum
     with _timed(seconds, "sample"):

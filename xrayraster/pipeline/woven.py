@@ -21,7 +21,7 @@ from ..core.volume import VolumeGeometry
 from ..io.grid_file import write_grid_file
 from ..io.weave_file import WeaveFile, framing_geometry, load_weave_file, sample_grid, write_scene_file
 from ..scene.scene import Scene
-from ..weave.export import GENERATOR, REPORT_NAME, Part, write_parts, write_report
+from ..weave.export import GENERATOR, REPORT_NAME, MeshPart, write_parts, write_report
 from ..weave.sample import Sample
 
 __all__ = ["GRID_NAME", "SCENE_NAME", "WeaveResult", "output_directory", "weave"]
@@ -38,7 +38,7 @@ class WeaveResult:
     voxel ``grid`` of its ``grid.json`` (the sample's box at the scan's magnified pixel pitch)."""
 
     sample: Sample
-    parts: list[Part]
+    parts: list[MeshPart]
     report: dict
     geometry: ConeBeamGeometry
     grid: VolumeGeometry

@@ -22,7 +22,6 @@ import tomli_w
 from ..core import fields
 from ..core.choices import RADIOGRAPH_OUTPUTS
 from ..core.errors import ConfigError
-from ..core.validate import show
 from ..dataset.dataset_file import refuse_dataset_table
 from ..io.scan_file import load_scan_file
 from ..io.scan_keys import INDEX, PATH_KEYS, absolute_paths, check_key, set_key
@@ -59,21 +58,13 @@ class View:
     def from_dict(cls, d: dict) -> "View":
         """The view a page asks for; ConfigError naming the field when a value is unusable or not of
         its JSON type (``"noise": "yes"`` is no boolean)."""
-        unknown = sorted(set(d) - {f.name for f in dataclasses.fields(cls)})
-        if unknown:
-            raise ConfigError(f"view: unknown field(s) {', '.join(unknown)}")
+        fields.only(d, {f.name for f in dataclasses.fields(cls)}, "view")
         angle = d.get("angle_deg")
-        if angle is not None:
-            angle = fields.number(angle, "angle_deg", "view")
-        output = d.get("output", "lineint")
-        if not isinstance(output, str) or output not in OUTPUTS:
-            raise ConfigError(f"view: output must be one of {', '.join(OUTPUTS)}, got {show(output)}")
-        noise = d.get("noise", False)
-        if not isinstance(noise, bool):
-            raise ConfigError(f"view: noise must be true or false, got {show(noise)}")
-        material = fields.integer(d.get("material", 0), "material", "view", 0)
-        seed = fields.integer(d.get("seed", 0), "seed", "view", 0)
-        return cls(angle, output, material, noise, seed)
+        return cls(angle_deg=None if angle is None else fields.number(angle, "angle_deg", "view"),
+                   output=fields.choice(d.get("output", "lineint"), "output", "view", OUTPUTS),
+                   material=fields.integer(d.get("material", 0), "material", "view", 0),
+                   noise=fields.boolean(d.get("noise", False), "noise", "view"),
+                   seed=fields.integer(d.get("seed", 0), "seed", "view", 0))
 
 
 @dataclass(frozen=True, eq=False)
@@ -155,8 +146,7 @@ class Document:
         geometry = table["geometry"]
         if view.angle_deg is not None and "vectors" not in geometry:
             if "angles_deg" in geometry:
-                turn = view.angle_deg - geometry["angles_deg"][0]
-                geometry["angles_deg"] = [a + turn for a in geometry["angles_deg"]]
+                geometry["angles_deg"] = turned_angles(geometry["angles_deg"], view.angle_deg)
             else:
                 geometry["start_angle_deg"] = view.angle_deg
         if self.kind == "scan":
@@ -181,6 +171,14 @@ class Document:
             return f"xrayraster render {name} -o view.tif --path-lengths"
         noise = f" --noise --seed {view.seed}" if view.noise else ""
         return f"xrayraster render {name} -o view.tif --output {view.output}{noise}"
+
+
+def turned_angles(angles, first: float) -> list[float]:
+    """``angles`` turned so the first is ``first`` (exactly) and the others keep their spacing from
+    it: ``first + (a - angles[0])``, in whatever unit they are given (a file's degrees, a geometry's
+    radians). The one turn of the preview: a saved file's ``angles_deg`` and a frame's geometry."""
+    start = angles[0]
+    return [first + (a - start) for a in angles]
 
 
 def names_files(key: str) -> bool:

@@ -20,13 +20,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.errors import ConfigError
+from ..core.estimate import plan
 from ..core.projections import Projections
 from ..gl.context import GLContext
 from ..physics.detector import Detector
-from ..pipeline.plan import check_frame
+from ..pipeline.plan import FrameJob
 from ..recon.opencl import CLContext
 from ..simulate.renderer import Renderer
-from .document import Document, View
+from .document import Document, View, turned_angles
 from .quick_slice import QuickSlice, quick_slice
 
 
@@ -117,7 +118,7 @@ class Previewer:
 
     def load(self, document: Document):
         """The document as its loader reads it, loaded again only when its tables changed; a frame
-        of it that cannot fit in memory is refused here, before any meshing (:func:`check_frame`)."""
+        of it that cannot fit in memory is refused here, before any meshing (:class:`FrameJob`)."""
         key, sample = json.dumps(document.table, sort_keys=True), document.sample_key()
         if self._loaded[0] != key:
             # Only the scanner changed: a scene file's meshes are not read again.
@@ -125,7 +126,7 @@ class Previewer:
             if document.kind == "scene" and loaded.spectrum is None:
                 raise ConfigError(f"{document.path}: a preview shows radiographs, so the file needs a [source] table "
                                   "(the X-ray spectrum) and [materials] (docs/scene-format.md)")
-            check_frame(loaded)
+            plan(FrameJob(loaded), ConfigError, f"{loaded.path} ")
             self._loaded = (key, sample, loaded)
         return self._loaded[2]
 
@@ -164,9 +165,9 @@ def turned(geometry, angle_deg: float | None):
     as it is for None or a per-view vector geometry, which has no angle to turn."""
     if angle_deg is None or not hasattr(geometry, "angles"):
         return geometry
-    # The first angle exactly as a file's start_angle_deg gives it, so a saved file's view 0 is this one.
-    first, start = math.radians(angle_deg), geometry.angles[0]
-    return dataclasses.replace(geometry, angles=tuple(first + (a - start) for a in geometry.angles))
+    # The first angle exactly as a file's start_angle_deg gives it, so a saved file's view 0 is this one;
+    # the others turned as a saved file's angles_deg are (:func:`~.document.turned_angles`).
+    return dataclasses.replace(geometry, angles=tuple(turned_angles(geometry.angles, math.radians(angle_deg))))
 
 
 def material_names(scene) -> list[str]:

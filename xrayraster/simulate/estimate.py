@@ -1,4 +1,4 @@
-"""The time and memory of rendering many views, before any is rendered.
+"""The time and memory of rendering many views, before any is rendered (:class:`RenderJob`).
 
 A view costs a fixed part (the passes' set-up and read-back), a part per detector pixel (ray set-up,
 the crossing lists, the spectral sum with noise) and a part per triangle (the crossing passes). The
@@ -10,6 +10,8 @@ noise on: 0.18 s a view, docs/twin.md), with the path lengths' benchmark (1.1 M 
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 from ..core.estimate import Estimate, Part
 
@@ -25,13 +27,22 @@ def seconds_per_view(pixels: int, triangles: int) -> float:
     return SECONDS_PER_VIEW + SECONDS_PER_PIXEL * pixels + SECONDS_PER_TRIANGLE * triangles
 
 
-def render_estimate(views: int, detector_shape: tuple[int, int], triangles: int, channels: int = 1,
-                    supersampling: int = 1) -> Estimate:
-    """Rendering ``views`` views of ``detector_shape`` pixels through ``triangles`` into one stack of
-    ``channels`` float32 images a view (the materials' path lengths, or 1 for radiographs)."""
-    rows, cols = detector_shape
-    stack = Part("float32 stack, held twice while stacked", STACK_COPIES * views * channels * rows * cols * 4,
-                 f"views = {views} of {rows}×{cols} pixels{f' × {channels} materials' if channels > 1 else ''}",
-                 "render fewer views at once (--views, or views= in the Python API) or use fewer detector pixels")
-    seconds = views * seconds_per_view(rows * cols * supersampling**2, triangles)
-    return Estimate(f"rendering of {views} views", seconds, (stack,))
+@dataclass(frozen=True)
+class RenderJob:
+    """Rendering ``views`` views of ``detector_shape`` (rows, cols) pixels through ``triangles``
+    into one stack of ``channels`` float32 images a view (the materials' path lengths, or 1 for
+    radiographs), each pixel cast ``supersampling``² rays: a :class:`~xrayraster.core.estimate.Planned` job."""
+
+    views: int
+    detector_shape: tuple[int, int]
+    triangles: int
+    channels: int = 1
+    supersampling: int = 1
+
+    def estimate(self) -> Estimate:
+        views, channels, (rows, cols) = self.views, self.channels, self.detector_shape
+        stack = Part("float32 stack, held twice while stacked", STACK_COPIES * views * channels * rows * cols * 4,
+                     f"views = {views} of {rows}×{cols} pixels{f' × {channels} materials' if channels > 1 else ''}",
+                     "render fewer views at once (--views, or views= in the Python API) or use fewer detector pixels")
+        seconds = views * seconds_per_view(rows * cols * self.supersampling**2, self.triangles)
+        return Estimate(f"rendering of {views} views", seconds, (stack,))

@@ -9,6 +9,7 @@ import time
 import numpy as np
 
 from ..core.errors import RenderError
+from ..core.estimate import plan
 from ..core.projections import Projections
 from ..gl.pathlengths import PathLengthRenderer
 from ..physics.beer_lambert import pixel_photon_factor, thread_count
@@ -16,7 +17,7 @@ from ..physics.detector import Detector
 from ..physics.radiograph import Radiograph, SpectralModel, flat_noise, radiograph, spectral_model
 from ..physics.realism import FLAT_TAG, GAIN_TAG, Realism, calibration_rng, focal_sigma_px, gain_map
 from ..scene.scene import Scene
-from .estimate import render_estimate
+from .estimate import RenderJob
 
 
 class Renderer(PathLengthRenderer):
@@ -182,8 +183,8 @@ class Renderer(PathLengthRenderer):
         """Refuse a stack of ``views`` that cannot fit in memory (:mod:`~xrayraster.simulate.estimate`)."""
         if not isinstance(scene, Scene):
             raise RenderError(f"expected a Scene, got {type(scene).__name__}")
-        render_estimate(len(views), self.vector_geometry.detector_shape, scene.num_triangles, channels,
-                        self.supersampling).check(RenderError)
+        plan(RenderJob(len(views), self.vector_geometry.detector_shape, scene.num_triangles, channels,
+                       self.supersampling), RenderError)
 
     def _views(self, views) -> list[int]:
         """``views`` (None: all) as a list of in-range indices, negatives counted from the end."""

@@ -1,6 +1,6 @@
 """Mesh files and the report of a woven sample: what ``Sample.export`` and ``xrayraster weave`` write.
 
-Work on :class:`Part` lists (what :meth:`Sample.parts` builds), never on a ``Sample``, so the
+Work on :class:`MeshPart` lists (what :meth:`Sample.parts` builds), never on a ``Sample``, so the
 sample module can call in here without a cycle.
 
 **Files.** One mesh per part, named ``<part>.<format>`` (STL binary or PLY binary, by trimesh),
@@ -33,8 +33,8 @@ from .manifold_mesh import box_minus, from_manifold, to_manifold, union, without
 from .yarn import PRIORITIES
 
 __all__ = [
-    "GENERATOR", "REPORT_NAME", "Part", "export_report", "material_entry", "merge_meshes", "mesh_bounds", "occupied_volumes",
-    "part_file", "settle", "write_parts", "write_report",
+    "GENERATOR", "REPORT_NAME", "MeshPart", "export_report", "material_entry", "merge_meshes", "mesh_bounds",
+    "occupied_volumes", "part_file", "settle", "write_parts", "write_report",
 ]
 
 REPORT_NAME = "report.json"
@@ -42,7 +42,7 @@ GENERATOR = "xrayraster weave"
 
 
 @dataclass(frozen=True, eq=False)
-class Part:
+class MeshPart:
     """One object of a sample's scene and one mesh file of its export."""
 
     name: str
@@ -53,7 +53,7 @@ class Part:
     mesh: trimesh.Trimesh
 
 
-def occupied_volumes(parts: list[Part], families: dict[str, float]) -> dict[str, float]:
+def occupied_volumes(parts: list[MeshPart], families: dict[str, float]) -> dict[str, float]:
     """Volume (mm³) each family occupies when the higher ``families`` priority takes shared space.
 
     ``families`` maps family → priority; the matrix (lowest) is what the higher families leave of
@@ -96,7 +96,7 @@ def settle(objects: list[tuple[str, str, trimesh.Trimesh]], priorities: dict[str
     return settled, from_manifold(without_slivers(box_minus(box_mm, [taken]))), float(shared)
 
 
-def write_parts(parts: list[Part], directory, fmt: str) -> dict[str, str]:
+def write_parts(parts: list[MeshPart], directory, fmt: str) -> dict[str, str]:
     """Write each part's mesh as ``<name>.<fmt>`` in ``directory``; returns {part name: file name}."""
     check_choice(fmt, MESH_FORMATS, "format", WeaveError)
     directory = Path(directory)
@@ -108,7 +108,7 @@ def write_parts(parts: list[Part], directory, fmt: str) -> dict[str, str]:
     return files
 
 
-def export_report(parts: list[Part], facts: dict, settings: dict, box, *, resolve: str, per: str,
+def export_report(parts: list[MeshPart], facts: dict, settings: dict, box, *, resolve: str, per: str,
                   fmt: str) -> dict:
     """The report of an export (``Sample.exported``): the sample's ``settings`` (cell, tiling,
     resolution, seed, distortion), how it was resolved and written, the yarn counts and
@@ -151,7 +151,7 @@ def material_entry(material: Material) -> dict:
     return {"name": material.name, "density": material.density, "mass_fractions": material.mass_fractions}
 
 
-def mesh_bounds(parts: list[Part]) -> list[list[float]]:
+def mesh_bounds(parts: list[MeshPart]) -> list[list[float]]:
     """The ``[[min], [max]]`` corners (mm) of every part's vertices."""
     lo = np.min([p.mesh.bounds[0] for p in parts], axis=0)
     hi = np.max([p.mesh.bounds[1] for p in parts], axis=0)

@@ -41,6 +41,7 @@ from tqdm.auto import tqdm
 
 from ..core.choices import EXPORT_PER, MESH_FORMATS, WEAVE_RESOLVE, check_choice
 from ..core.errors import WeaveError
+from ..core.estimate import plan
 from ..core.files import atomic_directory
 from ..core.validate import show
 from ..scene.scene import Scene
@@ -49,7 +50,7 @@ from .distort import Distortion, layer_shift, yarn_draws, yarn_rng
 from .export import (
     GENERATOR,
     REPORT_NAME,
-    Part,
+    MeshPart,
     export_report,
     merge_meshes,
     settle,
@@ -59,7 +60,7 @@ from .export import (
 from .manifold_mesh import from_manifold, to_manifold
 from .materials import as_yarn_materials
 from .resolve import interpenetration, resolve_boolean
-from .size import SAMPLE_DEFAULTS, weave_estimate
+from .size import SAMPLE_DEFAULTS, WeaveJob
 from .spec import UnitCell
 from .sweep import bend_sagitta_mm, polygon_area
 from .yarn import LABELS, PRIORITIES, Yarn, section_outline
@@ -299,7 +300,7 @@ class Sample:
         """
         import manifold3d
 
-        weave_estimate(self, export=False).check(WeaveError)
+        plan(WeaveJob(self, export=False), WeaveError)
 
         lo, hi = self.yarn_box
         clip = manifold3d.Manifold.cube(tuple(hi - lo)).translate(tuple(lo))
@@ -322,8 +323,8 @@ class Sample:
         return out
 
     def parts(self, materials=None, *, per: str = "yarn", resolve: str = "priority", measure: bool = True,
-              progress: bool = False) -> tuple[list[Part], dict]:
-        """The sample's objects (:class:`~xrayraster.weave.export.Part`), and facts about its yarns.
+              progress: bool = False) -> tuple[list[MeshPart], dict]:
+        """The sample's objects (:class:`~xrayraster.weave.export.MeshPart`), and facts about its yarns.
 
         ``materials`` as for :meth:`scene`. ``per="yarn"``: the matrix and one part per yarn;
         ``"family"``: the matrix, the wefts, the warps (each family one mesh, the union of its yarns)
@@ -338,7 +339,7 @@ class Sample:
         """
         check_choice(per, EXPORT_PER, "per", WeaveError)
         check_choice(resolve, WEAVE_RESOLVE, "resolve", WeaveError)
-        weave_estimate(self, resolve, export=False).check(WeaveError)  # the boolean's pairs hold far more
+        plan(WeaveJob(self, resolve, export=False), WeaveError)  # the boolean's pairs hold far more
         family_materials, tracers = self._materials(materials)
         pieces = self.meshes(progress)
         matrix = self.matrix_mesh()
@@ -361,10 +362,11 @@ class Sample:
             if resolve == "boolean":  # a few parts: settled here, without touching shells inside a family
                 objects, matrix, after = settle(objects, PRIORITIES, self.box)
                 overlap.update({"after": after} if measure else {})
-        parts = [Part("matrix", "matrix", family_materials["matrix"], LABELS["matrix"], PRIORITIES["matrix"], matrix)]
+        parts = [MeshPart("matrix", "matrix", family_materials["matrix"], LABELS["matrix"], PRIORITIES["matrix"],
+                          matrix)]
         for name, family, mesh in objects:
             material, label = tracers.get(name, (family_materials[family], None))
-            parts.append(Part(name, family, material, LABELS[family] if label is None else label,
+            parts.append(MeshPart(name, family, material, LABELS[family] if label is None else label,
                               PRIORITIES[family], mesh))
         kinds = [yarn.kind for yarn, _ in pieces]
         yarns = {kind: kinds.count(kind) for kind in ("weft", "binder", "stuffer")}
@@ -407,7 +409,7 @@ class Sample:
         return report
 
     def exported(self, materials=None, *, per: str = "family", fmt: str = "stl", resolve: str = "priority",
-                 progress: bool = False) -> tuple[list[Part], dict]:
+                 progress: bool = False) -> tuple[list[MeshPart], dict]:
         """What :meth:`export` writes, in memory: the parts (one mesh file each) and the report
         (:func:`~xrayraster.weave.export.export_report`, with the seconds it took)."""
         check_choice(fmt, MESH_FORMATS, "format", WeaveError)

@@ -11,7 +11,9 @@ Every key that multiplies that count is in :class:`Size`: the yarns of a cell (`
 repeats (``cells``, ``layers_of_cells``) and the mesh (``points_per_section``, ``samples_per_mm``).
 A :class:`Size` is known from a ``[weave]`` table's checked values before the cell is built (building
 it generates every binder's path, ``binders × weft_per_layer`` gaps), so a file asking for a sample
-that cannot fit is refused before any of that work, naming the key that makes it large.
+that cannot fit is refused before any of that work, naming the key that makes it large: the jobs
+:class:`WeaveJob` (meshing, exporting) and :class:`BendSearch` go through
+:func:`~xrayraster.core.estimate.plan`.
 """
 
 from __future__ import annotations
@@ -167,27 +169,49 @@ def mesh_part(sample, bytes_per_triangle: int = BYTES_PER_TRIANGLE["meshes"], ta
                 triangles * bytes_per_triangle, size.key_text(key, tables), fix)
 
 
-def weave_estimate(sample, resolve: str = "priority", export: bool = True, tables: bool = False) -> Estimate:
-    """The time and memory of meshing the sample (a :class:`~xrayraster.weave.Sample` or a
-    :class:`Size`) with overlaps left to priorities or resolved by booleans (``resolve``);
-    ``export``: and measuring and writing it, as ``xrayraster weave`` does. ``tables``: the key in a
-    refusal after its table, as in a file."""
-    size = Size.of(sample)
-    stage = resolve if export or resolve == "boolean" else "meshes"
-    seconds = size.triangles() * SECONDS_PER_TRIANGLE * EXPORT_FACTOR[stage]
-    nx, ny = size.cells
-    return Estimate(f"woven sample of {nx} × {ny} × {size.layers_of_cells} cells", seconds,
-                    (mesh_part(size, BYTES_PER_TRIANGLE[stage], tables),))
+@dataclass(frozen=True)
+class WeaveJob:
+    """Meshing a sample (``size``: its :class:`Size`, or a :class:`~xrayraster.weave.Sample`, taken as
+    its size) with overlaps left to priorities or resolved by booleans (``resolve``); ``export``: and
+    measuring and writing it, as ``xrayraster weave`` does. ``tables``: the key in a refusal after
+    its table, as in a file. A :class:`~xrayraster.core.estimate.Planned` job."""
+
+    size: Size
+    resolve: str = "priority"
+    export: bool = True
+    tables: bool = False
+
+    def __post_init__(self):
+        object.__setattr__(self, "size", Size.of(self.size))  # a job holds sizes, never a built sample
+
+    def estimate(self) -> Estimate:
+        size = self.size
+        stage = self.resolve if self.export or self.resolve == "boolean" else "meshes"
+        seconds = size.triangles() * SECONDS_PER_TRIANGLE * EXPORT_FACTOR[stage]
+        nx, ny = size.cells
+        return Estimate(f"woven sample of {nx} × {ny} × {size.layers_of_cells} cells", seconds,
+                        (mesh_part(size, BYTES_PER_TRIANGLE[stage], self.tables),))
 
 
-def bend_search_estimate(sample, tables: bool = True) -> Estimate:
-    """The time and memory of finding the binders' tightest bend of the sample's cell (the search a
-    scan file's grid makes to choose the mesh knobs it leaves out): every binder at
-    :data:`BEND_SEARCH_POINTS_PER_NODE` points per weft column (and the two ends' nodes)."""
-    size = Size.of(sample)
-    points = size.binder_count * (size.weft_per_layer + 2) * BEND_SEARCH_POINTS_PER_NODE
-    key = f"{size.key_text('weft_per_layer', tables)}, binders = {size.binder_count}"
-    part = Part(f"{points:.2g} points along the binders", points * BYTES_PER_BEND_POINT, key,
-                "use fewer weft columns or binders, or give points_per_section and samples_per_mm in "
-                "[weave.sample] (then no bend is searched for)")
-    return Estimate("search for the binders' tightest bend", points * SECONDS_PER_BEND_POINT, (part,))
+@dataclass(frozen=True)
+class BendSearch:
+    """Finding the binders' tightest bend of a sample's cell (``size``: a :class:`Size` or a
+    :class:`~xrayraster.weave.Sample`), the search a scan file's grid makes to choose the mesh knobs
+    it leaves out: every binder at :data:`BEND_SEARCH_POINTS_PER_NODE` points per weft column (and
+    the two ends' nodes). ``tables``: the key in a refusal after its table. A
+    :class:`~xrayraster.core.estimate.Planned` job."""
+
+    size: Size
+    tables: bool = True
+
+    def __post_init__(self):
+        object.__setattr__(self, "size", Size.of(self.size))  # a job holds sizes, never a built sample
+
+    def estimate(self) -> Estimate:
+        size = self.size
+        points = size.binder_count * (size.weft_per_layer + 2) * BEND_SEARCH_POINTS_PER_NODE
+        key = f"{size.key_text('weft_per_layer', self.tables)}, binders = {size.binder_count}"
+        part = Part(f"{points:.2g} points along the binders", points * BYTES_PER_BEND_POINT, key,
+                    "use fewer weft columns or binders, or give points_per_section and samples_per_mm in "
+                    "[weave.sample] (then no bend is searched for)")
+        return Estimate("search for the binders' tightest bend", points * SECONDS_PER_BEND_POINT, (part,))
