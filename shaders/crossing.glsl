@@ -2,7 +2,8 @@
 //  * sum (default): the signed distance goes into the pixel's 32-bit fixed-point accumulator of
 //    the object's channel (fixed_point.glsl: exact, order-independent sums, so the total is
 //    deterministic), and, for an object nested in another (Scene.nesting), is taken off its
-//    container's channel.
+//    container's channel. An overlap term (scene/overlap_terms.py) whose sign is -1 (drawn = 3)
+//    counts the other way round in both.
 //  * RESOLVE: the crossing is appended to the pixel's linked list for pathlength_resolve.comp.
 
 #ifdef RESOLVE
@@ -33,10 +34,10 @@ layout(std430, binding = BINDING_ACCUMULATORS) buffer Accumulators { uint acc[];
 
 void record_crossing(ivec2 px, uint object, int side, float t) {
     uint units = fixed_units(t);
-    uint value = side > 0 ? units : 0u - units;  // exits add t, entries subtract it
+    uvec4 info = object_info(object);  // channel, drawn (3: a term of sign -1), container channel + 1 (0: none)
+    uint value = (side > 0) != ((info.y & 2u) != 0u) ? units : 0u - units;  // exits add t, entries subtract it
     uint pixel = uint(px.y) * uint(u_size.x) + uint(px.x);
     uint npix = uint(u_size.x) * uint(u_size.y);
-    uvec4 info = object_info(object);  // channel, active, container channel + 1 (0: none)
     atomicAdd(acc[info.x * npix + pixel], value);
     if (info.z != 0u) atomicAdd(acc[(info.z - 1u) * npix + pixel], 0u - value);
 }

@@ -61,7 +61,7 @@ def test_tiff_metadata_describes_the_render(rendered):
     assert info["materials"] == ["aluminium", "steel"]
     assert info["views"] == [0, 1, 2, 3]
     assert info["supersampling"] == 1
-    assert info["method"] == "resolve"  # the ball overlaps the bracket
+    assert info["method"] == "nested"  # the ball cuts into the bracket: one pass, their intersection a signed mesh
     assert xr.ConeBeamGeometry.from_dict(info["geometry"]) == loaded.geometry
 
 

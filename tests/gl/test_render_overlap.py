@@ -1,11 +1,12 @@
-"""Priority rule for overlapping objects, against analytic interval splits."""
+"""Priority rule for overlapping objects, against analytic interval splits: by the per-pixel sort
+(resolve) and in one pass (nested, with partial overlaps as signed intersection meshes)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 import trimesh
-from references.chords import box_chord, cone_rays, convex_chord, random_rotation
+from references.chords import box_chord, box_interval, cone_rays, convex_chord, random_rotation
 
 import xrayraster as xr
 
@@ -20,8 +21,9 @@ def box_at(scene, size, centre, rotation, material, priority, name):
     scene.add(trimesh.creation.box(size), material, priority=priority, name=name, transform=xr.Transform(m))
 
 
+@pytest.mark.parametrize("overlap, method", [("auto", "nested"), ("resolve", "resolve")])
 @pytest.mark.parametrize("a_wins", [True, False])
-def test_two_overlapping_cubes_split_by_priority(render, a_wins):
+def test_two_overlapping_cubes_split_by_priority(render, a_wins, overlap, method):
     """Same orientation, offset centres: A ∩ B is a box, so each material's length is analytic."""
     rot = random_rotation(np.random.default_rng(11))
     ca, cb = np.array([-1.5, 0.5, 0.0]), rot @ np.array([4.0, 3.0, -2.0]) + np.array([-1.5, 0.5, 0.0])
@@ -29,8 +31,8 @@ def test_two_overlapping_cubes_split_by_priority(render, a_wins):
     box_at(scene, (8, 8, 8), ca, rot, "a", 2 if a_wins else 1, "A")
     box_at(scene, (8, 8, 8), cb, rot, "b", 1 if a_wins else 2, "B")
     assert scene.overlaps() == [("A", "B")]
-    got = render(GEOM, scene)
-    assert render.method == "resolve"
+    got = render(GEOM, scene, overlap=overlap)
+    assert render.method == method
     # Intersection: in the shared frame the boxes span [-4, 4] and [4,3,-2] ± 4.
     lo, hi = np.maximum([-4, -4, -4], np.array([4, 3, -2]) - 4), np.minimum([4, 4, 4], np.array([4, 3, -2]) + 4)
     c_int = ca + rot @ ((lo + hi) / 2)
@@ -129,12 +131,72 @@ def test_nesting_reduces_ownership_to_sums(render):
     assert nested.min() >= 0.0 and resolved[scene.materials.index("yarn")].max() > 1.0
 
 
-def test_partial_overlap_is_resolved_and_nested_cannot_be_forced(render):
+def owned_lengths(boxes, rays):
+    """Float64 per-ray length each box owns (the highest rank covering a point owns it): every
+    box's one interval along the ray (slab method), swept between the sorted end points."""
+    rays = [r.reshape(-1, 3) for r in rays]
+    enter, leave = zip(*(box_interval(*rays, centre, rot, np.asarray(size) / 2) for centre, rot, size in boxes))
+    enter, leave = np.stack(enter, -1), np.stack(leave, -1)  # (rays, boxes), boxes listed by rank
+    points = np.sort(np.concatenate([enter, leave], -1), -1)
+    mids, widths = (points[:, 1:] + points[:, :-1]) / 2, np.diff(points, axis=-1)
+    inside = (enter[:, None, :] <= mids[..., None]) & (mids[..., None] < leave[:, None, :])
+    ranks = np.arange(len(boxes))
+    owner = np.where(inside.any(-1), np.argmax(np.where(inside, ranks, -1), -1), -1)
+    return np.stack([np.where(owner == k, widths, 0.0).sum(-1) for k in ranks])
+
+
+@pytest.mark.parametrize("overlap", ["auto", "nested", "resolve"])
+def test_pairs_and_a_triple_in_a_container_own_what_the_priority_rule_gives(render, overlap):
+    """Three tilted bars that cut each other in pairs and all three at once, inside a matrix block,
+    and a fourth of the lowest bar's material: each material's length against the float64 sweep.
+    One pass needs pair terms and a triple term here."""
+    rot = random_rotation(np.random.default_rng(5))
+    boxes = [  # (centre, rotation, size), by rank
+        (np.zeros(3), rot, (16, 16, 16)),
+        (rot @ [0, 0, 0], rot, (12, 3, 3)),
+        (rot @ [1, 1, 0], rot, (3, 12, 3)),
+        (rot @ [-1, 0, 1], rot, (3, 3, 12)),
+        (rot @ [3, -1.5, -1], rot, (2, 8, 2)),
+    ]
+    materials = ["matrix", "weft", "warp", "binder", "weft"]
+    scene = xr.Scene()
+    for k, ((centre, r, size), material) in enumerate(zip(boxes, materials)):
+        box_at(scene, size, centre, r, material, k, f"b{k}")
+    terms = scene.one_pass().terms
+    assert sorted(len(t.members) for t in terms).count(3) >= 1
+    got = render(GEOM, scene, overlap=overlap)
+    assert render.method == ("nested" if overlap == "auto" else overlap)
+    owned = owned_lengths(boxes, RAYS).reshape(len(boxes), N, N)
+    want = {m: sum(owned[k] for k, mk in enumerate(materials) if mk == m) for m in scene.materials}
+    for channel, material in enumerate(scene.materials):
+        assert np.abs(got[channel] - want[material]).max() <= 1e-4, material
+    assert min(owned[k].max() for k in range(1, 5)) > 1.0  # every bar is seen
+
+
+def test_partial_overlaps_render_in_one_pass_unless_four_objects_share_space(render):
     scene = xr.Scene()
     box_at(scene, (8, 8, 8), np.zeros(3), np.eye(3), "a", 0, "A")
     box_at(scene, (4, 4, 4), np.array([3.0, 0, 0]), np.eye(3), "b", 1, "B")  # pokes out of A
-    assert scene.nesting() is None
+    assert scene.nesting() is None and len(scene.one_pass().terms) == 1
+    one_pass = render(GEOM, scene)
+    assert render.method == "nested"
+    assert np.abs(one_pass - render(GEOM, scene, overlap="resolve")).max() <= 1e-4
+    for k in range(2):  # four boxes with a common corner: a term of four would be needed
+        box_at(scene, (4, 4, 4), np.array([3.0, 1.0 + k, 1.0 - k]), np.eye(3), "c", 2 + k, f"C{k}")
+    assert scene.one_pass() is None
     render(GEOM, scene)
     assert render.method == "resolve"
-    with pytest.raises(xr.RenderError, match="partial overlaps"):
+    with pytest.raises(xr.RenderError, match="overlaps that one pass can render"):
         render(GEOM, scene, overlap="nested")
+
+
+def test_terms_with_more_triangles_than_rays_leave_the_sort(render):
+    """A 4×4 detector: two overlapping balls' intersection has more triangles than the 16 rays cost to sort."""
+    scene = xr.Scene()
+    for k, name in enumerate("ab"):
+        scene.add(trimesh.creation.icosphere(3, 4.0).apply_translation([3.0 * k, 0, 0]), name, priority=k, name=name)
+    assert sum(len(t.mesh.faces) for t in scene.one_pass().terms) > 16
+    geom = xr.ConeBeamGeometry(SOD, SDD, (4, 4), 10 * PIXEL, [THETA])
+    sorted_ = render(geom, scene)
+    assert render.method == "resolve"
+    assert np.abs(render(geom, scene, overlap="nested") - sorted_).max() <= 1e-4

@@ -59,18 +59,21 @@ class UploadedScene:
     """A scene uploaded once (vertices relative to ``ref``) and reused for every view.
 
     Objects are numbered by rank (priority, then insertion), so a resolve pass can compare
-    owners by index; every triangle carries its object's number.
+    owners by index; every triangle carries its object's number. The scene's overlap terms, when
+    uploaded (:meth:`Scene.one_pass`: a one-pass sum with partial overlaps), follow the objects,
+    numbered from ``len(ranked)``.
     """
 
     scene: Scene
     revision: int
+    terms: tuple  # OverlapTerms after the objects (empty unless asked for)
     ref: np.ndarray  # (3,) mm: the point all uploaded positions are relative to
     triangles: moderngl.Texture  # 3 RGBA32F texels per triangle: corners (mm, relative to ref), object in w
     objects: moderngl.Texture  # RGBA32UI per object: channel, drawn in this view, container channel + 1, label
     large: moderngl.Buffer  # indirect draw command + indices of the triangles pass 2 draws
     large_corners: moderngl.Buffer  # the six window-space corners pass 2 draws for each
     ranked: list  # SceneObjects by rank
-    channels: np.ndarray  # channel of each object, by rank
+    channels: np.ndarray  # channel of each object by rank, then of each term (its first member's)
     num_channels: int
     num_triangles: int
     fixed_scale: float  # fixed-point units per mm of the sum accumulators
@@ -107,10 +110,11 @@ class CrossingEngine:
 
     # -- scene ------------------------------------------------------------------------------
 
-    def upload(self, scene: Scene) -> UploadedScene:
-        """The scene on the GPU, uploaded again only when it changed (:attr:`Scene.revision`)."""
+    def upload(self, scene: Scene, terms: tuple = ()) -> UploadedScene:
+        """The scene on the GPU, with ``terms`` (its :class:`~xrayraster.scene.overlap_terms.OverlapTerm`
+        list) after its objects; uploaded again only when either changed (:attr:`Scene.revision`)."""
         cached = self._scene
-        if cached is not None and cached.scene is scene and cached.revision == scene.revision:
+        if cached is not None and cached.scene is scene and cached.revision == scene.revision and cached.terms is terms:
             return cached
         if cached is not None:
             cached.release()
@@ -119,13 +123,14 @@ class CrossingEngine:
         ref = bounds.mean(axis=0)
         materials = scene.materials
         ranked = sorted(scene.objects, key=lambda o: o.rank)
-        num_triangles = sum(len(o.mesh.faces) for o in ranked)
+        meshes = [o.mesh for o in ranked] + [t.mesh for t in terms]
+        num_triangles = sum(len(m.faces) for m in meshes)
         texels = _texel_rows(3 * num_triangles, 4, np.float32)  # filled in place: no list of copies
         soup = texels[:3 * num_triangles].reshape(num_triangles, 3, 4)
         start = 0
-        for number, o in enumerate(ranked):
-            part = soup[start:start + len(o.mesh.faces)]
-            part[:, :, :3] = (o.mesh.vertices - ref).astype(np.float32)[o.mesh.faces]
+        for number, mesh in enumerate(meshes):
+            part = soup[start:start + len(mesh.faces)]
+            part[:, :, :3] = (mesh.vertices - ref).astype(np.float32)[mesh.faces]
             part[:, 0, 3] = np.array(number, np.uint32).view(np.float32)
             start += len(part)
         soup[:] = soup[_by_size(soup[:, :, :3])]
@@ -134,16 +139,19 @@ class CrossingEngine:
         fixed_scale = 2.0 ** np.floor(np.log2(2.0**30 / diagonal))
         ctx = self.gl.ctx
         corners = np.array([[x, y, z] for x in bounds[:, 0] for y in bounds[:, 1] for z in bounds[:, 2]]) - ref
+        objects = scene.objects
         self._scene = UploadedScene(
             scene=scene,
             revision=scene.revision,
+            terms=terms,
             ref=ref,
             triangles=self._texture(texels, "f4", f"the scene's {num_triangles} triangles"),
-            objects=self._texture(_texel_rows(len(ranked), 4, np.uint32), "u4", f"the scene's {len(ranked)} objects"),
+            objects=self._texture(_texel_rows(len(meshes), 4, np.uint32), "u4", f"the scene's {len(meshes)} objects"),
             large=ctx.buffer(reserve=4 * (4 + num_triangles)),
             large_corners=ctx.buffer(reserve=6 * 8 * num_triangles),
             ranked=ranked,
-            channels=np.array([materials.index(o.material) for o in ranked], np.uint32),
+            channels=np.array([materials.index(o.material) for o in ranked]
+                              + [materials.index(objects[t.members[0]].material) for t in terms], np.uint32),
             num_channels=len(materials),
             num_triangles=num_triangles,
             fixed_scale=float(fixed_scale),
@@ -163,14 +171,19 @@ class CrossingEngine:
         return texture
 
     def object_table(self, uploaded: UploadedScene, view: int, skip=None) -> np.ndarray:
-        """``(objects, 4)`` uint32 by rank: channel, drawn (0 when wholly behind the source or
-        ``skip(object)`` is true), 0 (a container's channel + 1, set by nested path lengths), label."""
-        table = np.zeros((len(uploaded.ranked), 4), np.uint32)
+        """``(objects + terms, 4)`` uint32 by rank: channel, drawn (0 when wholly behind the source or
+        ``skip(object)`` is true; a term as its first member, 3 instead of 1 when its sign is −1),
+        0 (a container's channel + 1, set by nested path lengths), label (0 for a term)."""
+        n = len(uploaded.ranked)
+        table = np.zeros((n + len(uploaded.terms), 4), np.uint32)
         table[:, 0] = uploaded.channels
-        table[:, 1] = self._in_front_of_source(uploaded, view)
+        table[:n, 1] = self._in_front_of_source(uploaded, view)
         if skip is not None:
-            table[:, 1] *= [not skip(o) for o in uploaded.ranked]
-        table[:, 3] = [o.label for o in uploaded.ranked]
+            table[:n, 1] *= [not skip(o) for o in uploaded.ranked]
+        table[:n, 3] = [o.label for o in uploaded.ranked]
+        position = {o.order: k for k, o in enumerate(uploaded.ranked)}
+        for k, term in enumerate(uploaded.terms):  # inside its members: drawn when they are
+            table[n + k, 1] = table[position[term.members[0]], 1] * (1 if term.sign > 0 else 3)
         return table
 
     def _in_front_of_source(self, uploaded: UploadedScene, view: int) -> np.ndarray:

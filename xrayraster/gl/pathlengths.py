@@ -9,14 +9,18 @@ rules). This module turns them into lengths by one of three methods:
   the same bytes every time. For scenes whose objects do not overlap.
 * ``method="nested"``: the same single pass when every overlap is one object wholly inside
   another (yarns in a matrix block, inclusions): each object also takes its length off its
-  container's channel (:meth:`Scene.nesting`), which is the priority rule without sorting.
+  container's channel (:meth:`Scene.nesting`), which is the priority rule without sorting. Partial
+  overlaps join it as signed intersection meshes (:meth:`Scene.one_pass`,
+  :mod:`xrayraster.scene.overlap_terms`: inclusion–exclusion), as a woven sample's yarns need.
 * ``method="resolve"``: every crossing goes into a per-pixel list, which a compute pass
   (``shaders/pathlength_resolve.comp``) sorts and sweeps: between two crossings the
-  highest-priority object the ray is inside owns the length. Used when objects overlap partially.
+  highest-priority object the ray is inside owns the length. Used when objects overlap partially
+  in a way the terms cannot write (:mod:`~xrayraster.scene.overlap_terms` says when).
 
 ``overlap="auto"`` (default) picks ``sum`` when :meth:`Scene.overlaps` finds no overlapping
-objects, ``nested`` when all overlaps are containments, else ``resolve``; the choice is logged
-and kept in :attr:`PathLengthRenderer.last_method`, and any method can be forced.
+objects, ``nested`` when all overlaps are containments or the partial ones have terms, else
+``resolve``; the choice is logged and kept in :attr:`PathLengthRenderer.last_method`, and any
+method can be forced.
 """
 
 from __future__ import annotations
@@ -96,11 +100,17 @@ class PathLengthRenderer:
             raise RenderError(f"view {view} is out of range: the geometry has {self.vector_geometry.num_views} views")
         view %= self.vector_geometry.num_views
         method = self._choose_method(scene)
+        nesting, terms = None, ()
+        if method == "nested":
+            # Without terms only when slivers below the overlap test's tolerance (1e-6) cannot have
+            # them: the overlaps that count are containments, as before terms.
+            one_pass = scene.one_pass()
+            nesting, terms = (one_pass.nesting, one_pass.terms) if one_pass is not None else (scene.nesting(), ())
         with self.gl.current():
-            uploaded = self.engine.upload(scene)
+            uploaded = self.engine.upload(scene, terms)
             table = self.engine.object_table(uploaded, view)
             if method == "nested":
-                drawn, container = _nesting_columns(scene, uploaded).T
+                drawn, container = _nesting_columns(nesting, uploaded).T
                 table[:, 1] *= drawn
                 table[:, 2] = container
             if method == "resolve":
@@ -164,21 +174,37 @@ class PathLengthRenderer:
             )
 
     def _choose_method(self, scene: Scene) -> str:
-        if self.overlap == "nested" and scene.nesting() is None:
-            raise RenderError("overlap='nested' needs every overlap to be one object wholly inside another; "
-                              "this scene has partial overlaps: use overlap='resolve' or 'auto'")
+        if self.overlap == "nested" and scene.one_pass() is None:
+            raise RenderError("overlap='nested' needs overlaps that one pass can render (containments, and partial "
+                              "overlaps of at most three objects in one container); this scene has others: use "
+                              "overlap='resolve' or 'auto'")
         if self.overlap != "auto":
             method, why = self.overlap, "forced"
         elif not (pairs := scene.overlaps()):
             method, why = "sum", "no overlaps"
         elif scene.nesting() is not None:
             method, why = "nested", f"{len(pairs)} overlapping pairs, each one object inside another"
+        elif (one_pass := scene.one_pass()) is None:
+            method, why = "resolve", f"{len(pairs)} overlapping pairs, some partial beyond what one pass can render"
+        elif (extra := sum(len(t.mesh.faces) for t in one_pass.terms)) > (pixels := self._pixels()):
+            method, why = "resolve", (f"{len(pairs)} overlapping pairs, some partial: their {len(one_pass.terms)} "
+                                      f"intersection meshes' {extra} triangles would cost more than sorting "
+                                      f"{pixels} pixels' crossings")
         else:
-            method, why = "resolve", f"{len(pairs)} overlapping pairs, some partial"
+            method, why = "nested", (f"{len(pairs)} overlapping pairs, the partial ones as {len(one_pass.terms)} "
+                                     f"signed intersection meshes ({extra} triangles)")
         if method != self.last_method:
             log.info("path lengths: method=%s (%s)", method, why)
         self.last_method = method
         return method
+
+    def _pixels(self) -> int:
+        """The rays of a view (pixels times supersampling²). The overlap terms pay per triangle and the
+        per-pixel sort per ray: on llvmpipe (2 cores) the woven twin_small's 50 k terms' triangles
+        cost as much as sorting 256² pixels, and half as much at 512²; on a GPU the sort is slower
+        still (BENCHMARKS.md). So terms are drawn when their triangles are at most the rays."""
+        rows, cols = self._render_vec.detector_shape
+        return rows * cols
 
     def _resolve(self, uploaded: UploadedScene, view: int, table: np.ndarray) -> np.ndarray:
         rows, cols = self._render_vec.detector_shape
@@ -192,15 +218,16 @@ class PathLengthRenderer:
         return data.reshape(nch, rows, cols).copy()
 
 
-def _nesting_columns(scene: Scene, uploaded: UploadedScene) -> np.ndarray:
-    """Per object (by rank): (1 if it is drawn else 0, its container's channel + 1 or 0)."""
-    nesting = scene.nesting()
+def _nesting_columns(nesting: list[int | None], uploaded: UploadedScene) -> np.ndarray:
+    """Per object (by rank), then per term: (1 if it is drawn else 0, its container's channel + 1
+    or 0). A term takes the container of its first member, whose channel it counts in."""
     channel = {o.order: c for o, c in zip(uploaded.ranked, uploaded.channels)}
-    columns = np.zeros((len(uploaded.ranked), 2), np.uint32)
+    orders = [o.order for o in uploaded.ranked] + [t.members[0] for t in uploaded.terms]
+    columns = np.zeros((len(orders), 2), np.uint32)
     columns[:, 0] = 1
-    for k, o in enumerate(uploaded.ranked):
-        container = nesting[o.order]
-        if container == o.order or (container is not None and channel[container] == channel[o.order]):
+    for k, (order, own) in enumerate(zip(orders, uploaded.channels)):
+        container = nesting[order]
+        if container == order or (container is not None and channel[container] == own):
             columns[k, 0] = 0  # hidden, or +L and -L in one channel: nothing to draw
         elif container is not None:
             columns[k, 1] = channel[container] + 1

@@ -18,6 +18,7 @@ import numpy as np
 from ..core.errors import SceneError
 from ..core.transform import Transform
 from .mesh import Mesh, load_mesh
+from .overlap_terms import NOISE, OverlapTerm, overlap_terms
 
 
 @dataclass(frozen=True, eq=False)
@@ -40,8 +41,9 @@ class Scene:
     def __init__(self):
         self._objects: list[SceneObject] = []
         self.revision = 0  # bumped by every change, so renderers know to re-upload
-        self._overlaps: list[_Overlap] | None = None
+        self._overlaps: _Overlaps | None = None
         self._nesting: tuple[list[int | None] | None] | None = None  # (result,) once computed
+        self._one_pass: tuple[OnePass | None] | None = None
 
     def add(
         self,
@@ -85,6 +87,7 @@ class Scene:
         self.revision += 1
         self._overlaps = None
         self._nesting = None
+        self._one_pass = None
         return obj
 
     @property
@@ -128,7 +131,7 @@ class Scene:
         the smaller object counts. Those that manifold3d cannot read count as overlapping, so the
         renderer errs on the side of resolving priorities.
         """
-        return [(self._objects[o.a].name, self._objects[o.b].name) for o in self._find_overlaps()]
+        return [(self._objects[o.a].name, self._objects[o.b].name) for o in self._find_overlaps().pairs]
 
     def nesting(self) -> list[int | None] | None:
         """When every overlap is one object wholly inside another: per object (insertion order),
@@ -143,18 +146,45 @@ class Scene:
         (a yarn cut flush with its matrix block) count as inside.
         """
         if self._nesting is None:
-            self._nesting = (_nesting(self._objects, self._find_overlaps()),)
+            pairs = self._find_overlaps().pairs
+            self._nesting = (None if any(o.inner is None for o in pairs) else _nesting(self._objects, pairs),)
         return self._nesting[0]
 
-    def _find_overlaps(self) -> list["_Overlap"]:
+    def one_pass(self) -> "OnePass | None":
+        """How the scene renders in one pass although some objects overlap partially: the nesting
+        of the containments, and the partial overlaps as signed intersection meshes
+        (:mod:`~xrayraster.scene.overlap_terms`); None when they cannot stand in for the priority
+        rule (then the renderer resolves per ray). Computed once, from the booleans that found the
+        overlaps."""
+        if self._one_pass is None:
+            found = self._find_overlaps()
+            if any(o.inner is None and (o.a, o.b) not in found.partial for o in found.pairs):
+                self._one_pass = (None,)  # manifold3d could not read an object: no intersection to draw
+                return None
+            inside = [o for o in found.pairs if o.inner is not None]
+            nesting = _nesting(self._objects, inside)
+            containers = {o.a if o.inner == o.b else o.b for o in inside}
+            terms = overlap_terms([o.rank for o in self._objects], found.partial, found.solids, nesting, containers)
+            self._one_pass = (None if terms is None else OnePass(nesting, terms),)
+        return self._one_pass[0]
+
+    def _find_overlaps(self) -> "_Overlaps":
         if self._overlaps is None:
             self._overlaps = _find_overlaps(self._objects)
         return self._overlaps
 
 
-def _nesting(objects: list[SceneObject], overlaps: list["_Overlap"]) -> list[int | None] | None:
-    if any(o.inner is None for o in overlaps):
-        return None
+@dataclass(frozen=True)
+class OnePass:
+    """:meth:`Scene.one_pass`: per object (insertion order) the object whose length it subtracts
+    from, or None, or its own index when hidden (as :meth:`Scene.nesting`); and the terms."""
+
+    nesting: list[int | None]
+    terms: tuple[OverlapTerm, ...]
+
+
+def _nesting(objects: list[SceneObject], overlaps: list["_Overlap"]) -> list[int | None]:
+    """The containers of :meth:`Scene.nesting`, from ``overlaps`` that are all containments."""
     containers: dict[int, list[int]] = {}
     for o in overlaps:
         containers.setdefault(o.inner, []).append(o.b if o.inner == o.a else o.a)
@@ -175,10 +205,17 @@ class _Overlap:
     inner: int | None  # the one wholly inside the other, if either is
 
 
-def _find_overlaps(objects: list[SceneObject]) -> list[_Overlap]:
+@dataclass(frozen=True)
+class _Overlaps:
+    pairs: list[_Overlap]  # the overlaps above 1e-6 of the smaller object: they pick the method
+    partial: dict  # (i, j) -> their intersection (manifold3d), for every partial overlap above NOISE
+    solids: list  # each object's manifold3d solid; None where unread (no box overlap) or unreadable
+
+
+def _find_overlaps(objects: list[SceneObject]) -> _Overlaps:
     bounds = [o.mesh.bounds for o in objects]
     solids: dict[int, object] = {}
-    found = []
+    found, partial = [], {}
     for i in range(len(objects)):
         for j in range(i + 1, len(objects)):
             (lo_a, hi_a), (lo_b, hi_b) = bounds[i], bounds[j]
@@ -188,11 +225,15 @@ def _find_overlaps(objects: list[SceneObject]) -> list[_Overlap]:
             if a is None or b is None:
                 found.append(_Overlap(i, j, None))
                 continue
-            shared = (a ^ b).volume()
+            intersection = a ^ b
+            shared = intersection.volume()
             small, inner = min((a.volume(), i), (b.volume(), j))
+            contains = shared >= (1 - 1e-6) * small
             if shared > 1e-6 * small:
-                found.append(_Overlap(i, j, inner if shared >= (1 - 1e-6) * small else None))
-    return found
+                found.append(_Overlap(i, j, inner if contains else None))
+            if shared > NOISE * small and not contains:
+                partial[(i, j)] = intersection
+    return _Overlaps(found, partial, [solids.get(o.order) for o in objects])
 
 
 def _solid(obj: SceneObject, cache: dict):
