@@ -10,6 +10,33 @@ import numpy as np
 from ..core.choices import DETECTOR_MODES, check_choice
 from ..core.errors import PhysicsError
 
+# A Gaussian blur whose standard deviation is below this many pixels is skipped, at no cost
+# (docs/realism.md, "Options too small to show"). Both blurs' kernels are exactly [0, 1, 0] in
+# float64 there (the weight one pixel away underflows to 0: exp(−1/(2σ²)) below σ ≈ 0.026 px for the
+# sampled kernel, 1 − erf below σ ≈ 0.059 px for the pixel-averaged one), so skipping changes no
+# bit of the noise-free signal. On a detector that integrates over its pixels, such a blur would
+# change a pixel by at most √(2/π)·σ of the contrast around it per axis (:func:`blur_change_bound`):
+# 0.8 % at the threshold, where a pixel sampled at its centre already places an edge only to
+# within the pixel (up to half the contrast).
+NEGLIGIBLE_BLUR_PX = 0.01
+
+
+def negligible_blur(sigma_px: float) -> bool:
+    """Whether a Gaussian blur of standard deviation ``sigma_px`` (pixels) is skipped: 0, or below
+    :data:`NEGLIGIBLE_BLUR_PX`."""
+    return sigma_px < NEGLIGIBLE_BLUR_PX
+
+
+def blur_change_bound(sigma_rows_px: float, sigma_cols_px: float) -> float:
+    """The most a Gaussian blur of these standard deviations (pixels) can change a pixel of an image
+    integrated over its pixels, as a share of the image's range: √(2/π)·(σ_rows + σ_cols).
+
+    Along one axis, the blur moves a share ∫₀^∞ Φ(−t/σ) dt = σ/√(2π) of a pixel's content across
+    each of its two edges, out and in: at most 2·σ/√(2π) of the range (a one-pixel line; a step
+    edge gets half). A separable blur's two passes add (docs/realism.md derives it).
+    """
+    return math.sqrt(2 / math.pi) * (sigma_rows_px + sigma_cols_px)
+
 
 @dataclass(frozen=True)
 class Detector:
@@ -69,10 +96,21 @@ class Detector:
         eta = self.efficiency(energies)
         return eta if self.counting else energies * eta
 
+    @property
+    def blur_skipped(self) -> bool:
+        """Whether ``blur_sigma_px`` is given but too small to show (:data:`NEGLIGIBLE_BLUR_PX`): not applied."""
+        return 0 < self.blur_sigma_px and negligible_blur(self.blur_sigma_px)
+
     def blur(self, image: np.ndarray) -> np.ndarray:
-        """The point-spread applied to ``image`` (edges extended); unchanged without blur."""
+        """The point-spread applied to ``image`` (edges extended); ``image`` itself without blur, with
+        a negligible ``blur_sigma_px`` (:data:`NEGLIGIBLE_BLUR_PX`) or with a ``psf`` of one centre weight."""
         if self.psf is not None:
-            return _convolve2d(image, np.asarray(self.psf))
+            kernel = np.asarray(self.psf)
+            if np.count_nonzero(kernel) == 1 and kernel[kernel.shape[0] // 2, kernel.shape[1] // 2]:
+                return image  # the centre's weight alone, 1 once normalised: an identity
+            return _convolve2d(image, kernel)
+        if negligible_blur(self.blur_sigma_px):
+            return image
         return gaussian_blur(image, self.blur_sigma_px, self.blur_sigma_px)
 
     def read_out(self, signal: np.ndarray, rng, *, gain=None, frames: int = 1) -> np.ndarray:
@@ -82,7 +120,8 @@ class Detector:
         out = self.blur(signal)
         if gain is not None:
             out = out * gain
-        out = out + self.dark
+        if self.dark:  # adding 0 would change no value, only cost a pass over the image
+            out = out + self.dark
         if rng is not None and self.electronic_noise > 0:
             out = out + rng.normal(0.0, self.electronic_noise / np.sqrt(frames), out.shape)
         return out

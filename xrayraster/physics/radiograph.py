@@ -16,7 +16,7 @@ import numpy as np
 from ..core.choices import RADIOGRAPH_OUTPUTS, check_choice
 from ..core.errors import PhysicsError
 from . import beer_lambert
-from .detector import Detector, gaussian_blur
+from .detector import Detector, gaussian_blur, negligible_blur
 from .realism import scaled_poisson
 from .spectral_table import SpectralTable, moment_weights, spectral_table
 
@@ -95,7 +95,9 @@ def radiograph(lengths, materials, spectrum, detector: Detector, factor, *, outp
     spectral sum (default every core; :func:`~xrayraster.physics.beer_lambert.thread_count`).
     The scanner's imperfections (:mod:`~xrayraster.physics.realism`): ``focal_sigma_px``, the focal
     spot's Gaussian blur ``(rows, cols)`` in pixels; ``gain``, a per-pixel gain map the flat does not
-    correct; ``flat_noise``, the scan's flat over the exact one (:func:`flat_noise`). ``model``:
+    correct; ``flat_noise``, the scan's flat over the exact one (:func:`flat_noise`). A focal blur
+    narrower than :data:`~xrayraster.physics.detector.NEGLIGIBLE_BLUR_PX` along an axis is skipped
+    there, and with both axes skipped the view is exactly the view without a spot. ``model``:
     the bins, μ and spectral table of :func:`spectral_model` for these materials, spectrum and
     detector (made here when None, without a table), so the views of a scan share them.
     """
@@ -104,6 +106,7 @@ def radiograph(lengths, materials, spectrum, detector: Detector, factor, *, outp
         raise PhysicsError("noise=True needs rng (a numpy.random.Generator, e.g. np.random.default_rng(seed))")
     model = model or spectral_model(materials, spectrum, detector, bin_tolerance=bin_tolerance)
     energies, photons, dropped, mu = model.energies, model.photons, model.dropped, model.mu
+    focal_sigma_px = applied_focal_sigma_px(focal_sigma_px)
     quantum = _detected(lengths, mu, photons, energies, detector, factor, focal_sigma_px, rng if noise else None,
                         threads, model.table)
     raw = detector.read_out(quantum, rng if noise else None, gain=gain)
@@ -138,6 +141,7 @@ def flat_noise(spectrum, detector: Detector, factor, shape: tuple[int, int], fra
     of ``frames`` times the photons, and their read noises average to ``electronic_noise / √frames``.
     """
     energies, photons, _ = _bins(spectrum, detector, bin_tolerance)
+    focal_sigma_px = applied_focal_sigma_px(focal_sigma_px)
     open_beam = np.zeros((1, *shape), np.float32), np.zeros((1, len(energies)))  # no path length, no μ
     exposed = _detected(*open_beam, photons, energies, detector, frames * np.asarray(factor, dtype=np.float64),
                         focal_sigma_px, rng, threads, None) / frames
@@ -147,6 +151,13 @@ def flat_noise(spectrum, detector: Detector, factor, shape: tuple[int, int], fra
         raise PhysicsError(f"the mean of {frames} noisy flats has pixels without signal; raise the exposure (mas) "
                            "or the number of flats (flat_fields)")
     return ratio
+
+
+def applied_focal_sigma_px(sigma_px) -> tuple[float, float]:
+    """The focal blur's ``(rows, cols)`` standard deviations in pixels as applied: an axis whose blur is
+    negligible (:func:`~xrayraster.physics.detector.negligible_blur`) gets 0, so it costs nothing,
+    and a view with neither axis left is drawn as without a spot (Beer–Lambert's own noise sampling)."""
+    return tuple(0.0 if negligible_blur(sigma) else float(sigma) for sigma in sigma_px)
 
 
 def _bins(spectrum, detector: Detector, bin_tolerance: float) -> tuple[np.ndarray, np.ndarray, float]:
@@ -181,7 +192,10 @@ def _detected(lengths, mu, photons, energies, detector: Detector, factor, focal_
 
 def _focal_blur(image: np.ndarray, sigma_rows_px: float, sigma_cols_px: float) -> np.ndarray:
     """The focal spot's Gaussian averaged over each pixel: exact on the pixel-sharp edges of a view
-    at any width (docs/realism.md measures it against sub-source sampling)."""
+    at any width (docs/realism.md measures it against sub-source sampling). ``image`` itself without a
+    spot, or with one too small to show (:func:`applied_focal_sigma_px`)."""
+    if not (sigma_rows_px or sigma_cols_px):
+        return image
     return gaussian_blur(image, sigma_rows_px, sigma_cols_px, pixel_averaged=True)
 
 

@@ -3,7 +3,8 @@
 * **Focal spot** (``focal_spot_mm``, the FWHM in mm of a Gaussian source spot): an object plane at
   distance z from the source casts a penumbra of ``spot · (SDD − z) / z`` on the detector, so the
   transmitted intensity is blurred by a Gaussian of that FWHM, z being one chosen plane
-  (``focal_plane_mm``, default the rotation axis), before its photons are counted.
+  (``focal_plane_mm``, default the rotation axis), before its photons are counted. A penumbra whose
+  σ is below :data:`~xrayraster.physics.detector.NEGLIGIBLE_BLUR_PX` pixels is skipped (docs/realism.md).
 * **Flat fields** (``flat_fields = N``): the flat that normalises every view is the mean of N noisy
   open-beam exposures, one realisation per scan, instead of the exact (noise-free) flat.
 * **Gain variation** (``gain_variation = σ``): a fixed per-pixel gain map g, mean 1 and relative

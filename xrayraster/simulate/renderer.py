@@ -3,6 +3,7 @@ detector, noise). GL knows nothing of photons and the physics nothing of GL; thi
 
 from __future__ import annotations
 
+import logging
 import sys
 import time
 
@@ -13,11 +14,13 @@ from ..core.estimate import plan
 from ..core.projections import Projections
 from ..gl.pathlengths import PathLengthRenderer
 from ..physics.beer_lambert import pixel_photon_factor, thread_count
-from ..physics.detector import Detector
+from ..physics.detector import NEGLIGIBLE_BLUR_PX, Detector, blur_change_bound, negligible_blur
 from ..physics.radiograph import Radiograph, SpectralModel, flat_noise, radiograph, spectral_model
 from ..physics.realism import FLAT_TAG, GAIN_TAG, Realism, calibration_rng, focal_sigma_px, gain_map
 from ..scene.scene import Scene
 from .estimate import RenderJob
+
+log = logging.getLogger("xrayraster")
 
 
 class Renderer(PathLengthRenderer):
@@ -32,6 +35,7 @@ class Renderer(PathLengthRenderer):
         self._calibration = None  # (key, gain map, flat noise) of the last scan projected: see _fixed_patterns
         self._model = None  # (key, SpectralModel) of the last scene projected: see _spectral_model
         self.last_seconds: dict[str, float] = {}  # the last project()'s GL path lengths and CPU physics, s
+        self._skips_logged: set = set()  # the negligible options already logged for this scan: see _log_skip
         super().__init__(geometry, **options)
 
     def project(self, scene: Scene, spectrum, view: int = 0, *, detector: Detector | None = None,
@@ -57,6 +61,9 @@ class Renderer(PathLengthRenderer):
         if realism.needs_seed and seed is None:
             raise RenderError("flat_fields and gain_variation need a seed (an int): their patterns are drawn from it")
         detector = detector or Detector()
+        if detector.blur_skipped:
+            sigma = detector.blur_sigma_px
+            self._log_skip(("blur_sigma_px", sigma), f"detector blur_sigma_px = {sigma:g}", blur_change_bound(sigma, sigma))
         start = time.perf_counter()
         lengths = self.path_lengths(scene, view)
         traced = time.perf_counter()
@@ -75,6 +82,7 @@ class Renderer(PathLengthRenderer):
         """:meth:`PathLengthRenderer.retarget`; the scan's flats and gain map are drawn anew for it."""
         super().retarget(geometry)
         self._calibration = None
+        self._skips_logged.clear()  # a new scan: its negligible options are logged again
 
     def _spectral_model(self, scene: Scene, spectrum, detector: Detector, table: bool) -> SpectralModel:
         """The scene's bins, μ and (``table``) spectral table, kept for the next view of the same scene.
@@ -88,9 +96,27 @@ class Renderer(PathLengthRenderer):
         return self._model[1]
 
     def _focal_sigma_px(self, realism: Realism, view: int) -> tuple[float, float]:
+        """The focal spot's penumbra σ ``(rows, cols)`` in pixels for ``view``; the physics skips an axis
+        where it is negligible (:func:`~xrayraster.physics.radiograph.applied_focal_sigma_px`), logged here."""
         if not realism.focal_spot_mm:
             return (0.0, 0.0)
-        return focal_sigma_px(self.vector_geometry, view, realism.focal_spot_mm, realism.focal_plane_mm)
+        sigma = focal_sigma_px(self.vector_geometry, view, realism.focal_spot_mm, realism.focal_plane_mm)
+        skipped = [s if negligible_blur(s) else 0.0 for s in sigma]
+        if any(skipped):
+            axes = ", ".join(f"σ_{axis} = {s:.2g} px" for s, axis in zip(skipped, ("rows", "cols")) if s)
+            self._log_skip(("focal_spot_mm", realism.focal_spot_mm, realism.focal_plane_mm),
+                           f"focal_spot_mm = {realism.focal_spot_mm:g} (its penumbra's {axes} in view {view})",
+                           blur_change_bound(*skipped))
+        return sigma
+
+    def _log_skip(self, key: tuple, what: str, bound: float) -> None:
+        """Log at INFO, once per option and scan (until :meth:`retarget`), that a blur too small to show
+        was skipped: ``what`` it was and the ``bound`` on its effect (a share of an edge's contrast)."""
+        if key in self._skips_logged:
+            return
+        self._skips_logged.add(key)
+        log.info("skipped %s: below the %g px threshold, it would change no pixel by more than %.2g %% of the "
+                 "contrast around it (docs/realism.md)", what, NEGLIGIBLE_BLUR_PX, 100 * bound)
 
     def _fixed_patterns(self, spectrum, detector: Detector, realism: Realism, seed):
         """The scan's gain map and flat noise (None when off), drawn from ``seed`` on their own streams;
