@@ -42,11 +42,11 @@ def main(argv=None) -> int:
             print(f"xrayraster {__version__}")
             return EXIT_OK
         with interrupts.deferred():  # a library interrupted mid-import may swallow it, or crash
-            from . import build, compare, preview, reconstruct, render, scan, voxelize, weave
+            from . import build, compare, info, preview, reconstruct, render, scan, voxelize, weave
         parser = argparse.ArgumentParser(prog="xrayraster", description="X-ray CT simulation from triangle meshes.")
         parser.add_argument("--version", action="version", version=f"xrayraster {__version__}")
         subparsers = parser.add_subparsers(dest="command", required=True)
-        for command in (scan, build, weave, render, preview, reconstruct, voxelize, compare):
+        for command in (scan, build, weave, render, preview, reconstruct, voxelize, compare, info):
             command.add_parser(subparsers)
         args = parser.parse_args(argv)
         verbose = args.verbose
