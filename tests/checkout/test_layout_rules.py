@@ -85,9 +85,10 @@ def test_no_test_imports_another_test_module():
 
 def test_every_checkout_path_that_ci_and_the_docs_name_exists():
     """Paths into tests/, scripts/, examples/, references/ and docs/ named by .ci/run, the README,
-    docs/ and pyproject.toml exist (a glob must match something)."""
+    docs/, pyproject.toml and the GPU check (scripts/gpu_check.sh) exist (a glob must match something)."""
     pattern = re.compile(r"(?<![\w/.-])((?:tests|scripts|examples|references|docs)/[\w*./-]*[\w*])")
     sources = [ROOT / ".ci" / "run", ROOT / "README.md", ROOT / "BENCHMARKS.md", ROOT / "pyproject.toml",
+               ROOT / "scripts" / "gpu_check.sh",
                *sorted((ROOT / "docs").glob("*.md"))]
     missing, named = [], 0
     for source in sources:
