@@ -73,6 +73,27 @@ def test_project_all_defaults_to_every_view_and_equals_project(renderer, scene):
     json.dumps(p.metadata())  # every provenance value is JSON-ready
 
 
+def test_project_all_overlaps_the_physics_and_keeps_every_byte(renderer, scene, monkeypatch):
+    """The physics of view k runs on a thread while the GL renders view k + 1: with the scan's
+    shared patterns (flats, gain map, a focal spot) and views out of order, every view is still
+    the bytes project() gives alone, and the physics did run off the main thread."""
+    realism = xr.Realism(focal_spot_mm=0.3, flat_fields=4, gain_variation=0.01)
+    threads = set()
+    physics_of = renderer._physics_of
+
+    def watched(*args):
+        run = physics_of(*args)
+        return lambda view, lengths: threads.add(threading.current_thread().name) or run(view, lengths)
+
+    monkeypatch.setattr(renderer, "_physics_of", watched)
+    views = [3, 0, 4, 1]
+    p = renderer.project_all(scene, MONO, views, noise=True, seed=11, realism=realism, progress=False)
+    for k, v in enumerate(views):
+        np.testing.assert_array_equal(p.data[k], renderer.project(scene, MONO, v, noise=True, seed=11,
+                                                                  realism=realism).image)
+    assert any(name.startswith("xrayraster-physics") for name in threads)
+
+
 @pytest.mark.parametrize("mode, unit", [("integrating", "keV deposited"), ("counting", "counts")])
 def test_raw_units_follow_the_detector(renderer, scene, mode, unit):
     detector = xr.Detector(mode=mode)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import logging
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -55,6 +56,19 @@ class Renderer(PathLengthRenderer):
         10⁸ photons a pixel) instead of summed in every pixel; noise-free views stay exact.
         The bins, attenuation coefficients and table are made once for the views of a scene.
         """
+        physics = self._physics_of(scene, spectrum, detector, output, noise, seed, realism, spectral_table)
+        start = time.perf_counter()
+        lengths = self.path_lengths(scene, view)
+        traced = time.perf_counter()
+        shot = physics(view, lengths)
+        self.last_seconds = {"path_lengths": traced - start, "physics": time.perf_counter() - traced}
+        return shot
+
+    def _physics_of(self, scene: Scene, spectrum, detector, output, noise, seed, realism, spectral_table):
+        """The options of :meth:`project` checked, and the CPU half of a view for them: a function
+        ``(view, path lengths) -> Radiograph`` that touches no GL, so it can run on a thread while
+        the GL renders the next view. What every view shares (the spectral model, the scan's fixed
+        patterns) is made here, once, before any view's physics runs."""
         realism = realism or Realism()
         if noise and seed is None:
             raise RenderError("noise=True needs a seed (an int), so the noise is reproducible")
@@ -64,19 +78,19 @@ class Renderer(PathLengthRenderer):
         if detector.blur_skipped:
             sigma = detector.blur_sigma_px
             self._log_skip(("blur_sigma_px", sigma), f"detector blur_sigma_px = {sigma:g}", blur_change_bound(sigma, sigma))
-        start = time.perf_counter()
-        lengths = self.path_lengths(scene, view)
-        traced = time.perf_counter()
-        view %= self.vector_geometry.num_views
-        rng = np.random.default_rng([int(seed), view]) if noise else None
-        factor = pixel_photon_factor(self.vector_geometry, view)
         gain, flat = self._fixed_patterns(spectrum, detector, realism, seed)
         model = self._spectral_model(scene, spectrum, detector, spectral_table and noise)
-        shot = radiograph(lengths, scene.materials, spectrum, detector, factor, output=output, noise=noise, rng=rng,
-                          threads=self.threads, focal_sigma_px=self._focal_sigma_px(realism, view), gain=gain,
-                          flat_noise=flat, model=model)
-        self.last_seconds = {"path_lengths": traced - start, "physics": time.perf_counter() - traced}
-        return shot
+        materials, views = scene.materials, self.vector_geometry.num_views
+
+        def physics(view: int, lengths: np.ndarray) -> Radiograph:
+            view %= views
+            rng = np.random.default_rng([int(seed), view]) if noise else None
+            return radiograph(lengths, materials, spectrum, detector, pixel_photon_factor(self.vector_geometry, view),
+                              output=output, noise=noise, rng=rng, threads=self.threads,
+                              focal_sigma_px=self._focal_sigma_px(realism, view), gain=gain, flat_noise=flat,
+                              model=model)
+
+        return physics
 
     def retarget(self, geometry) -> None:
         """:meth:`PathLengthRenderer.retarget`; the scan's flats and gain map are drawn anew for it."""
@@ -176,8 +190,21 @@ class Renderer(PathLengthRenderer):
         self._check_stack(scene, views, 1)
         detector = detector or Detector()
         realism = realism or Realism()
-        shots = [self.project(scene, spectrum, v, detector=detector, output=output, noise=noise, seed=seed,
-                              realism=realism, spectral_table=spectral_table) for v in _report(views, progress, output)]
+        physics = self._physics_of(scene, spectrum, detector, output, noise, seed, realism, spectral_table)
+        shots = []
+        # The GL renders view k + 1 while a thread turns view k into a radiograph (numpy and the
+        # spectral sum release the GIL): a view costs the larger of the two, not their sum, where
+        # they run on different hardware (a GPU), and the GL's idle moments are filled on a CPU.
+        # Each view's physics depends on its path lengths and index alone: the same bytes as in turn.
+        with ThreadPoolExecutor(1, thread_name_prefix="xrayraster-physics") as cpu:
+            pending = None
+            for v in _report(views, progress, output):
+                lengths = self.path_lengths(scene, v)
+                if pending is not None:
+                    shots.append(pending.result())
+                pending = cpu.submit(physics, v, lengths)
+            if pending is not None:
+                shots.append(pending.result())
         unit = "1" if output != "raw" else "counts" if detector.counting else "keV deposited"
         # An ideal scan's provenance stays as it was before the realism options existed.
         extra = {"realism": realism.to_dict()} if realism.active else {}
