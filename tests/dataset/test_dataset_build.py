@@ -197,10 +197,14 @@ def test_ctrl_c_stops_cleanly_and_the_rerun_completes(reference, tmp_path):
     command = [sys.executable, "-m", "xrayraster", "build", str(out.parent / "tiny.toml"), "-o",
                str(tmp_path / "out"), "--quiet", "--workers", "2"]
     proc = subprocess.Popen(command, env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    time.sleep(3.0)
+    # Mid-build: as soon as the first sample is in place (a fixed sleep let a fast machine finish first).
+    samples, deadline = tmp_path / "out" / "samples", time.monotonic() + 120
+    while proc.poll() is None and time.monotonic() < deadline and not (
+            samples.is_dir() and any(not s.name.startswith(".") for s in samples.iterdir())):
+        time.sleep(0.01)
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=60)
-    assert proc.returncode == 130 and err.count("\n") == 1 and "Traceback" not in err
+    assert proc.returncode == 130 and err.count("\n") == 1 and "Traceback" not in err, (proc.returncode, err)
     hidden = [p for p in (tmp_path / "out").rglob(".*")]
     assert hidden == [], f"temporaries left: {hidden}"
     assert subprocess.run(command, env=child_env(), capture_output=True, timeout=300).returncode == 0
