@@ -11,9 +11,9 @@ one ray per pixel centre) and stored as float32; projections are cached in out/b
 
 Both codes reconstruct with the plain ramp (Ram-Lak), from identical float32 arrays. Times:
 ours = ``xr.fdk`` with a warm ``CLContext`` (kernels compiled), the compile time of the first
-call measured separately, and, where the device runs the 16-lane (AVX-512) backprojection, also
-with the 8-lane (AVX2) one it replaced (``ours_8_lanes_s``, and its largest difference from the
-16-lane volume); RTK = ``FDKConeBeamReconstructionFilter.Update()`` with 2 threads, 16
+call measured separately, and, where the device chooses the backprojection itself (``WINDOW_LANES``
+"auto": on AVX-512 CPUs ``backproject_columns``), also with the 8-lane (AVX2) windowed kernel
+(``ours_8_lanes_s``, and its largest difference from the default volume); RTK = ``FDKConeBeamReconstructionFilter.Update()`` with 2 threads, 16
 projections per pass (scripts/peers/rtk_peer.py). Best of ``repeats`` each. Voxel updates per second =
 voxels × views / seconds.
 

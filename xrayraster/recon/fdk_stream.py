@@ -40,11 +40,19 @@ ZCHUNK = 16  # voxels along z per work-item of the scalar backprojection (shader
 WINDOW_VOXELS = 64  # voxels along z per work-item of backproject_windowed, at most (measured best on 2 cores)
 SLAB_MULTIPLE = 64  # slabs are cut at multiples of both
 TILE = (16, 16, 1)  # work-group: a 16×16 column of voxels reads a compact patch of every view
-MAX_BATCH_VIEWS = 256  # views per backprojection launch: 48 bytes each of constant memory
+MAX_BATCH_VIEWS = 256  # views per backprojection launch: 48 bytes each of constant memory (96: backproject_columns)
 # Kernel choices, normally automatic; the tests set them to check every path on one device.
 LAYOUT = "auto"  # filtered views by "rows" (GPUs), by "columns" (CPUs), or "auto" by device type
 WINDOW_LANES = "auto"  # backproject_windowed's vector width where it applies (x86 CPUs, upright detectors):
 # "auto" 16 with AVX-512, else 8 with AVX2; 16 or 8 (if the device has it); 0: the scalar kernel
+COLUMNS = True  # with WINDOW_LANES "auto": backproject_columns first, where it applies and the device builds it
+# (AVX-512); False: backproject_windowed as above
+COLUMN_TILE = 16  # backproject_columns: voxel columns along x per work-item (fixed: the kernel's vector width)
+COLUMN_VIEWS = 4  # backproject_columns: views per pass over a work-item's columns (L1; measured best on 2 cores)
+COLUMN_BLOCK = 32  # backproject_columns: views per pass of a whole work-group (L2), a barrier between passes
+COLUMN_GROUP = (1, 16, 1)  # backproject_columns' work-group: small (PoCL keeps its private arrays on the stack)
+UPRIGHT = "auto"  # the upright-detector kernels where the detector's columns are parallel to z (every circular
+# orbit; "auto"), or the general kernel everywhere (False)
 HOST_FILTER = "auto"  # rows filtered on the host (host_filter.py): "auto" on CPU devices, True, False
 DEVICE_SHARE = 0.8  # of the device's global memory we plan to use
 WINDOW_PAD = 32 * 4  # bytes after each batch of filtered views: backproject_windowed reads past the last column
@@ -323,21 +331,30 @@ class FDKStream:
         import pyopencl as cl
 
         matrices = self.views.matrices
-        upright = not np.any(matrices[:, :, 2][:, [0, 2]])  # column and depth constant along z
+        # The test for the upright kernels: a voxel's detector column and depth do not change along z
+        # (P's third column has zeros in its first and last rows), as on every circular orbit.
+        upright = UPRIGHT == "auto" and not np.any(matrices[:, :, 2][:, [0, 2]])
         defines = {"ZCHUNK": ZCHUNK, **self._layout, **({"UPRIGHT": 1} if upright else {})}
-        kernel, self._zchunk = None, ZCHUNK
+        kernel, self._zchunk, self._columns = None, ZCHUNK, False
         widths = {"auto": (16, 8), 16: (16,), 8: (8,), 0: ()}[WINDOW_LANES] if upright and self._layout else ()
-        for width in widths:  # compiled only where the device has AVX2 (8) or AVX-512 (16)
+        # backproject_columns first where it may apply (upright, column-major, automatic choice), then
+        # backproject_windowed: each compiled only where the device has AVX-512 (16 lanes) or AVX2 (8).
+        kinds = ([("backproject_columns", 16)] if COLUMNS and WINDOW_LANES == "auto" and widths else [])
+        for name, width in kinds + [("backproject_windowed", width) for width in widths]:
             # As many vectors per work-item as the slab fills, up to WINDOW_VOXELS.
             groups = min(WINDOW_VOXELS // width, 1 << max(0, math.ceil(math.log2(-(-self.plan.slab // width)))))
-            kernel = self.ctx.kernel("fdk_backproject.cl", "backproject_windowed",
-                                     {**defines, "WIDTH": width, "GROUPS": groups}, optional=True)
+            extra = {"TILE_VIEWS": COLUMN_VIEWS, "TILE_BLOCK": COLUMN_BLOCK} if name == "backproject_columns" else {}
+            kernel = self.ctx.kernel("fdk_backproject.cl", name, {**defines, "WIDTH": width, "GROUPS": groups, **extra},
+                                     optional=True)
             if kernel is not None:
-                self._zchunk = width * groups
+                self._zchunk, self._columns = width * groups, name == "backproject_columns"
                 break
         self._bp_kernel = kernel or self.ctx.kernel("fdk_backproject.cl", "backproject", defines)
         fits = self._bp_kernel.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, self.ctx.device)
-        self._tile = TILE if fits >= TILE[0] * TILE[1] else None  # else the driver picks
+        if self._columns:
+            self._tile = COLUMN_GROUP if fits >= math.prod(COLUMN_GROUP) else (1, 1, 1)
+        else:
+            self._tile = TILE if fits >= TILE[0] * TILE[1] else None  # else the driver picks
         _, ny, nx = self.volume.shape
         self._plane = ny * nx * 4
         # On a CPU device a buffer over the result array itself saves a copy of the volume.
@@ -364,9 +381,13 @@ class FDKStream:
         matrices = self.views.matrices[batch.start : batch.stop].copy()
         matrices[:, :, 3] += z0 * matrices[:, :, 2]  # slab-local k
         matrices[:, 0] += self.views.lead * matrices[:, 2]  # column of the filtered row: virtual ones first
-        m_dev = self.ctx.buffer(matrices.reshape(-1, 12).astype(np.float32), "r")
+        # backproject_columns projects in double (its setup per voxel column and view), the others in float
+        m_dev = self.ctx.buffer(matrices.reshape(-1, 12).astype(np.float64 if self._columns else np.float32), "r")
         s_dev = self.ctx.buffer(self.views.scale[batch.start : batch.stop].astype(np.float32), "r")
-        size = (_round_up(nx, TILE[0]), _round_up(ny, TILE[1]), -(-depth // self._zchunk))
+        if self._columns:  # a work-item per COLUMN_TILE columns along x
+            size = (-(-nx // COLUMN_TILE), _round_up(ny, self._tile[1]), -(-depth // self._zchunk))
+        else:
+            size = (_round_up(nx, TILE[0]), _round_up(ny, TILE[1]), -(-depth // self._zchunk))
         self._bp_kernel(self.ctx.queue, size, self._tile, slab, filtered, m_dev, s_dev, np.int32(len(batch)),
                         np.int32(rows), np.int32(cols), np.int32(nx), np.int32(ny), np.int32(depth))
         m_dev.release()
