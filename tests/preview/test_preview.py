@@ -3,7 +3,8 @@ frame encoding, the server's answers and refusals (Starlette's test client), and
 real headless browser (Debian's Chromium, driven by Selenium): the image follows the angle slider
 and a drag on the image, and is the renderer's view at that angle, window and level paint what they say, a bad value shows
 its error and keeps the last good image, and the saved settings render with `xrayraster render`
-to the frame on screen.
+to the frame on screen. While the input moves, frames are reduced (the binned detector's render,
+labelled so on the page), the full frame follows when it stops, and superseded requests are dropped.
 
 XRAYRASTER_PREVIEW_SCREENSHOT=PATH also saves the page as the browser test leaves it."""
 
@@ -28,10 +29,11 @@ from starlette.websockets import WebSocketDisconnect  # noqa: E402
 import xrayraster as xr  # noqa: E402
 from xrayraster.cli import main  # noqa: E402
 from xrayraster.core.errors import ConfigError  # noqa: E402
+from xrayraster.gl.pathlengths import PathLengthRenderer  # noqa: E402
 from xrayraster.io.scene_file import load_scene_file  # noqa: E402
 from xrayraster.preview.document import Document, View  # noqa: E402
 from xrayraster.preview.encoding import LEVELS, decode, encode  # noqa: E402
-from xrayraster.preview.frames import Frame, Previewer, turned  # noqa: E402
+from xrayraster.preview.frames import MOVING_PIXELS, Frame, Previewer, binned, binning, turned  # noqa: E402
 from xrayraster.preview.notebook import free_port  # noqa: E402
 from xrayraster.preview.server import Background, Preview, make_app  # noqa: E402
 
@@ -100,6 +102,72 @@ def test_path_length_frames_show_one_material(scene_file, previewer):
     assert frame.unit == "mm" and frame.quantity == "path length: steel"
     with pytest.raises(ConfigError, match="material 5 is not one of the scene's 2 materials"):
         previewer.frame(document, View(output="path_length", material=5))
+
+
+def test_a_binned_detector_keeps_its_centre_extent_and_offsets():
+    """A reduced frame's detector: ⌈n / b⌉ pixels a side over the same extent, the same for a
+    circular geometry and its per-view vectors; the binning the smallest power of two that fits."""
+    cone = xr.ConeBeamGeometry(100.0, 250.0, (64, 81), (0.6, 0.5), (0.3, 1.2), detector_offset=(1.5, -2.0),
+                               source_offset=(0.25, 0.5))
+    coarse = binned(cone, 2)
+    assert coarse.detector_shape == (32, 41) and coarse.pixel_size == pytest.approx((1.2, 0.5 * 81 / 41), rel=1e-15)
+    assert (coarse.detector_offset, coarse.source_offset) == (cone.detector_offset, cone.source_offset)
+    np.testing.assert_allclose(binned(cone.to_vec(), 2).array, coarse.to_vec().array, rtol=0, atol=1e-12)
+    for geometry in (cone, coarse):  # the same detector: centre and both ends of a row, in mm
+        s, d, u, v = np.split(geometry.to_vec().array[1], 4)
+        np.testing.assert_allclose([d, d + u * geometry.detector_shape[1] / 2, d + v * geometry.detector_shape[0] / 2],
+                                   [d, d + np.array([np.cos(1.2), np.sin(1.2), 0]) * 0.5 * 81 / 2,
+                                    d + np.array([0, 0, 0.6 * 32])], rtol=0, atol=1e-12)
+    parallel = xr.ParallelBeamGeometry((10, 10), 1.0, (0.0,))
+    assert binned(parallel, 4).detector_shape == (3, 3) and binned(parallel, 4).pixel_size == (10 / 3, 10 / 3)
+    assert binned(cone, 1) is cone
+    assert MOVING_PIXELS == 256 * 256 and binning((512, 512), MOVING_PIXELS) == 2
+    assert binning((64, 80), MOVING_PIXELS) == 1 and binning((64, 80), 40 * 40) == 2 and binning((513, 512), 256**2) == 4
+    assert binning((3, 5), 1) == 8  # at most one pixel left
+
+
+def test_a_moving_frame_is_the_binned_detectors_render_and_the_full_one_follows(scene_file, gl):
+    """While the input moves a frame is reduced: the view on the binned detector, exactly as a renderer
+    of that geometry renders it (path lengths, and a noisy radiograph); each binning keeps its own
+    renderer and uploaded scene, so going back to the full frame uploads nothing again."""
+    document = Document.open(scene_file)
+    loaded = load_scene_file(scene_file)
+    previewer = Previewer(threads=1, moving_pixels=40 * 40)  # 64 × 80 binned 2 × 2: 32 × 40
+    try:
+        full = previewer.frame(document, View(angle_deg=10.0))
+        assert full.binning == 1 and full.full_shape == (64, 80) and full.image.shape == (64, 80)
+        uploaded = previewer._renderer.engine._scene
+        for angle in (10.5, 11.0, 11.5):
+            moving = previewer.frame(document, View(angle_deg=angle, output="path_length", material=1), moving=True)
+            assert moving.binning == 2 and moving.full_shape == (64, 80) and moving.image.shape == (32, 40)
+            assert moving.angle_deg == pytest.approx(angle)
+            with PathLengthRenderer(binned(turned(loaded.geometry, angle), 2)) as renderer:
+                np.testing.assert_array_equal(moving.image, renderer.path_lengths(loaded.scene, 0)[1])
+        noisy = previewer.frame(document, View(angle_deg=12.0, noise=True, seed=3), moving=True)
+        with xr.Renderer(binned(turned(loaded.geometry, 12.0), 2), threads=1) as renderer:
+            expected = renderer.project(loaded.scene, loaded.spectrum, 0, detector=loaded.detector, noise=True, seed=3)
+        np.testing.assert_array_equal(noisy.image, expected.image)
+        same = previewer.frame(document, View(angle_deg=12.0)).layout  # the same detector, seen from above
+        np.testing.assert_allclose(noisy.layout["detector"], same["detector"], rtol=1e-12)
+        assert noisy.layout["fov_mm"] == pytest.approx(same["fov_mm"], rel=1e-12)
+        final = previewer.frame(document, View(angle_deg=12.0))  # the input stopped: the full frame
+        assert final.binning == 1 and previewer._renderer.engine._scene is uploaded  # no upload again
+        np.testing.assert_array_equal(final.image, reference(scene_file, 12.0))
+        assert set(previewer._renderers) == {1, 2}
+        bigger = document.edited({"geometry.detector_shape": [128, 160], "geometry.pixel_size": 0.3})
+        assert previewer.frame(bigger, View(angle_deg=12.0), moving=True).binning == 4
+        assert set(previewer._renderers) == {1, 4}  # one reduced renderer at a time
+    finally:
+        previewer.release()
+    small = Previewer(threads=1)  # 64 × 80 is within MOVING_PIXELS: moving frames are full ones
+    try:
+        frame = small.frame(document, View(angle_deg=3.0), moving=True)
+        assert frame.binning == 1 and set(small._renderers) == {1}
+        np.testing.assert_array_equal(frame.image, reference(scene_file, 3.0))
+    finally:
+        small.release()
+    with pytest.raises(ConfigError, match="moving_pixels must be a positive integer, got 0"):
+        Previewer(moving_pixels=0)
 
 
 def test_edits_are_checked_by_the_files_own_loader(scene_file):
@@ -224,6 +292,48 @@ def test_the_server_answers_frames_and_errors_and_keeps_serving(scene_file, gl):
         assert bad.status_code == 400 and "no key 'mass'" in bad.json()["error"]
         refused = c.post("/slice", json={"edits": {}, "view": {}})
         assert refused.status_code == 400 and "a slice needs a scan file" in refused.json()["error"]
+
+
+def test_moving_requests_get_reduced_frames_and_superseded_requests_are_dropped(scene_file, gl):
+    """``moving: true`` asks for a reduced frame (the header says its binning and the full shape);
+    requests that arrive while a frame renders replace each other: the one after it is the newest,
+    the ones between are dropped, never answered."""
+    import threading
+
+    preview = Preview(Document.open(scene_file), threads=1, moving_pixels=40 * 40)
+    app = make_app(preview, host="127.0.0.1", port=8000)
+    with TestClient(app, base_url="http://127.0.0.1:8000") as c, c.websocket_connect("ws://127.0.0.1:8000/frames") as ws:
+        view = ws.receive_json()["view"]
+        ws.send_text(json.dumps({"id": 1, "edits": {}, "view": {**view, "angle_deg": 20.0}, "moving": True}))
+        header, values = decode(ws.receive_bytes())
+        assert header["id"] == 1 and header["binning"] == 2 and header["shape"] == [32, 40]
+        assert header["full_shape"] == [64, 80]
+        loaded = load_scene_file(scene_file)
+        with xr.Renderer(binned(turned(loaded.geometry, 20.0), 2), threads=1) as renderer:
+            within_a_level(header, values, renderer.project(loaded.scene, loaded.spectrum, 0, detector=loaded.detector).image)
+        ws.send_text(json.dumps({"id": 2, "edits": {}, "view": {**view, "angle_deg": 20.0}}))
+        header, values = decode(ws.receive_bytes())
+        assert header["id"] == 2 and header["binning"] == 1 and header["shape"] == header["full_shape"] == [64, 80]
+        within_a_level(header, values, reference(scene_file, 20.0))
+        ws.send_text(json.dumps({"id": 3, "edits": {}, "view": view, "moving": "yes"}))
+        assert ws.receive_json() == {"id": 3, "error": "a request's moving must be true or false, got 'yes'"}
+
+        # The render thread held busy: request 4 waits on it, 5 to 8 arrive meanwhile.
+        hold, held = threading.Event(), threading.Event()
+        blocker = preview._render.submit(lambda: (held.set(), hold.wait(TIMEOUT_S)))
+        assert held.wait(TIMEOUT_S)
+        ws.send_text(json.dumps({"id": 4, "edits": {}, "view": {**view, "angle_deg": 4.0}, "moving": True}))
+        wait_for(lambda: preview._render._jobs.qsize() == 1, "request 4 on the render thread's queue")
+        for i in range(5, 9):
+            ws.send_text(json.dumps({"id": i, "edits": {}, "view": {**view, "angle_deg": float(i)}, "moving": True}))
+        time.sleep(0.3)  # the server has read them all
+        hold.set()
+        blocker.result(TIMEOUT_S)
+        answered = [decode(ws.receive_bytes())[0] for _ in range(2)]
+        assert [(h["id"], h["angle_deg"]) for h in answered] == [(4, pytest.approx(4.0)), (8, pytest.approx(8.0))]
+        ws.send_text(json.dumps({"id": 9, "edits": {}, "view": view}))
+        assert decode(ws.receive_bytes())[0]["id"] == 9  # 5, 6 and 7 never answered: the next answer is 9's
+    preview.close()
 
 
 def test_a_page_gone_mid_frame_leaves_the_server_serving(scene_file, gl):
@@ -496,6 +606,66 @@ def test_the_page_turns_paints_reports_errors_and_saves_what_render_renders(brow
         within_a_level(header, final, tifffile.imread(out))
         if os.environ.get("XRAYRASTER_PREVIEW_SCREENSHOT"):
             browser.save_screenshot(os.environ["XRAYRASTER_PREVIEW_SCREENSHOT"])
+
+
+DRAG = """
+const [seconds, done] = [arguments[0], arguments[arguments.length - 1]];
+const slider = document.getElementById('angle'), label = document.getElementById('resolution');
+const canvas = document.getElementById('image'), p = xrPreview, start = performance.now();
+const seen = [];  // what the page showed while the input moved: frames, label, canvas
+let angle = parseFloat(slider.value);
+const timer = setInterval(() => {
+  angle += 0.5;
+  slider.value = angle;
+  slider.dispatchEvent(new Event('input'));
+  const h = p.frame && p.frame.header, box = canvas.getBoundingClientRect();
+  if (h) seen.push({id: h.id, binning: h.binning, label: label.textContent, cls: canvas.className,
+                    size: [canvas.height, canvas.width], box: [box.width, box.height]});
+  if (performance.now() - start > 1000 * seconds) {
+    clearInterval(timer);
+    const last = performance.now();
+    const settle = setInterval(() => {
+      const h = p.frame.header, box = canvas.getBoundingClientRect();
+      if (Math.abs(h.angle_deg - angle) < 1e-6 && h.binning === 1) {
+        clearInterval(settle);
+        done({seen, angle, full_ms: p.paintedAt - last, label: label.textContent, cls: canvas.className,
+              size: [canvas.height, canvas.width], box: [box.width, box.height]});
+      }
+    }, 5);
+  }
+}, 1000 / 60);
+"""
+
+
+def test_while_the_angle_is_dragged_the_page_shows_reduced_frames_then_the_full_one(browser, scene_file):
+    """Dragging the angle slider (input events at 60 a second): the page asks for reduced frames,
+    which are the binned detector's render, stretched to the full frame's size on screen and labelled
+    so; once the input stops, it asks for the full frame, labelled "full resolution", the
+    renderer's view at the last angle."""
+    loaded = load_scene_file(scene_file)
+    with Background(scene_file, port=free_port(), threads=1, moving_pixels=40 * 40) as server:
+        browser.get(server.url)
+        wait_for(lambda: frames(browser) >= 1, "the first frame")
+        browser.set_script_timeout(TIMEOUT_S)
+        drag = browser.execute_async_script(DRAG, 1.0)
+        reduced = browser.execute_script("const f = xrPreview.reduced; return {header: f.header, levels: Array.from(f.levels)};")
+        header, final = shown(browser)
+    moving = [s for s in drag["seen"] if s["binning"] == 2]
+    assert moving, "no reduced frame was shown while the angle moved"
+    for s in moving:
+        assert s["label"] == "preview: 1/2 resolution while moving (32 × 40 of 64 × 80 pixels)"
+        assert s["cls"] == "reduced" and s["size"] == [32, 40]
+        assert s["box"] == pytest.approx(drag["box"], abs=1)  # stretched to the full frame's size on screen
+    assert drag["label"] == "full resolution (64 × 80 pixels)" and drag["cls"] == "" and drag["size"] == [64, 80]
+    assert header["binning"] == 1 and header["angle_deg"] == pytest.approx(drag["angle"])
+    within_a_level(header, final, reference(scene_file, drag["angle"]))  # the full frame, exactly the renderer's
+    assert 0 < drag["full_ms"] < 5000
+    h = reduced["header"]
+    assert h["binning"] == 2 and h["shape"] == [32, 40] and h["full_shape"] == [64, 80]
+    levels = np.array(reduced["levels"], dtype=np.float64).reshape(h["shape"])
+    with xr.Renderer(binned(turned(loaded.geometry, h["angle_deg"]), 2), threads=1) as renderer:
+        expected = renderer.project(loaded.scene, loaded.spectrum, 0, detector=loaded.detector).image
+    within_a_level(h, h["lo"] + levels * ((h["hi"] - h["lo"]) / LEVELS), expected)
 
 
 def test_the_slice_button_shows_the_quick_slice_and_its_labels(browser, previewer):

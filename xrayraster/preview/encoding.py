@@ -1,7 +1,8 @@
 """A frame as one binary WebSocket message the page decodes (``static/preview.js``, ``decodeFrame``).
 
 Layout, little-endian: a uint32 header length, the header (UTF-8 JSON: ``id``, ``shape``,
-``lo``, ``hi``, ``quantity``, ``unit``, ``angle_deg``, ``seconds``, ``layout``), spaces up to an even
+``lo``, ``hi``, ``quantity``, ``unit``, ``angle_deg``, ``seconds``, ``layout``, ``binning`` (1: the
+full frame; b: a reduced one, the detector binned b × b) and ``full_shape``), spaces up to an even
 offset, then rows × cols uint16 levels. Level q stands for ``lo + q · (hi − lo) / 65535``:
 a float32 frame at half the bytes, off by at most (hi − lo) / 131070 (a 512² frame is 512 KiB,
 not 1 MiB, for a page behind an SSH tunnel). The page applies window and level itself, so moving
@@ -33,7 +34,8 @@ def quantized(image: np.ndarray) -> tuple[np.ndarray, float, float]:
 def encode(frame: Frame, request_id: int, extra: dict | None = None) -> bytes:
     return _packed(frame.image, {
         "id": request_id, "quantity": frame.quantity, "unit": frame.unit, "angle_deg": frame.angle_deg,
-        "seconds": frame.seconds, "layout": frame.layout, **(extra or {}),
+        "seconds": frame.seconds, "layout": frame.layout, "binning": frame.binning,
+        "full_shape": list(frame.full_shape or frame.image.shape), **(extra or {}),
     })
 
 

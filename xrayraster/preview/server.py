@@ -3,11 +3,12 @@ over a WebSocket.
 
 * ``GET /``: the page (``static/index.html``); ``/static/...``: its script and style (package data:
   no CDN, so it works offline).
-* ``WS /frames``: the page sends requests ``{"id", "edits", "view"}``, each the whole state (the
-  file's key edits so far and the :class:`~.document.View`); the server answers each it renders
-  with a binary frame (:mod:`.encoding`) or ``{"id", "error"}``. Requests that arrive while a frame
-  renders replace each other: the next frame is the newest request's, never a queue of stale
-  ones. The first message is ``{"type": "hello", ...}``: the file, its controls, outputs and
+* ``WS /frames``: the page sends requests ``{"id", "edits", "view", "moving"}``, each the whole
+  state (the file's key edits so far and the :class:`~.document.View`), ``moving`` true while the
+  input moves (a reduced frame, :meth:`~.frames.Previewer.frame`; the page asks for the full frame
+  once it stops); the server answers each it renders with a binary frame (:mod:`.encoding`) or
+  ``{"id", "error"}``. Requests that arrive while a frame renders replace each other: the next
+  frame is the newest request's, the superseded ones are dropped unanswered, never queued. The first message is ``{"type": "hello", ...}``: the file, its controls, outputs and
   materials, and the view it opens with.
 * ``POST /save/settings.toml``, ``/save/view.tif``, ``/save/view.png``: the state in the body,
   the file to download in the answer.
@@ -56,7 +57,7 @@ from ..core.tiff import quicklook_path
 from .controls import controls
 from .document import OUTPUTS, Document, View
 from .encoding import encode, encode_slice
-from .frames import Previewer, first_angle_deg, material_names
+from .frames import MOVING_PIXELS, Previewer, first_angle_deg, material_names
 from .listen import check_listen
 
 log = logging.getLogger("xrayraster")
@@ -129,11 +130,13 @@ class RenderThread:
 class Preview:
     """One document served: the previewer and the single thread that renders its frames
     (:class:`RenderThread`). A request waits at most ``deadline_s`` for its answer (:meth:`run`), and
-    no longer than the server runs: nothing the render thread does can hold the server."""
+    no longer than the server runs: nothing the render thread does can hold the server.
+    ``moving_pixels``: the most pixels of a reduced frame (:class:`~.frames.Previewer`)."""
 
-    def __init__(self, document: Document, threads: int | None = None, deadline_s: float = FRAME_DEADLINE_S):
+    def __init__(self, document: Document, threads: int | None = None, deadline_s: float = FRAME_DEADLINE_S,
+                 moving_pixels: int = MOVING_PIXELS):
         self.document, self.deadline_s = document, deadline_s
-        self._previewer = Previewer(threads)
+        self._previewer = Previewer(threads, moving_pixels)
         self._render = RenderThread("xrayraster-preview")
         self._closing = False
         # The first message depends on the document alone: made once, first, so that a new page
@@ -331,7 +334,10 @@ async def _answer(ws: WebSocket, preview: Preview, text: str | None) -> None:
         message = _request(text)
         request_id = message.get("id")
         document, view = preview.state(message)
-        frame = await preview.run(lambda previewer: previewer.frame(document, view))
+        moving = message.get("moving", False)
+        if not isinstance(moving, bool):
+            raise XrayrasterError(f"a request's moving must be true or false, got {moving!r:.40}")
+        frame = await preview.run(lambda previewer: previewer.frame(document, view, moving))
         await ws.send_bytes(encode(frame, request_id, {"command": document.command("settings.toml", view)}))
     except (XrayrasterError, ValueError) as exc:  # a bad value: the user's to fix
         await ws.send_json({"id": request_id, "error": str(exc)})
@@ -392,9 +398,9 @@ class Background:
     :meth:`stop` (or leaving a ``with`` block) shuts it down."""
 
     def __init__(self, path, *, host: str = "127.0.0.1", port: int = 8000, threads: int | None = None,
-                 deadline_s: float = FRAME_DEADLINE_S):
+                 deadline_s: float = FRAME_DEADLINE_S, moving_pixels: int = MOVING_PIXELS):
         check_listen(host, port, names=("host", "port"))
-        self._server, self._preview, self.url = _server(path, host, port, threads, deadline_s)
+        self._server, self._preview, self.url = _server(path, host, port, threads, deadline_s, moving_pixels)
         self._thread = threading.Thread(target=lambda: asyncio.run(self._server.serve()), daemon=True,
                                         name="xrayraster-preview-server")
         self._thread.start()
@@ -416,7 +422,8 @@ class Background:
         self.stop()
 
 
-def _server(path, host: str, port: int, threads: int | None, deadline_s: float = FRAME_DEADLINE_S):
+def _server(path, host: str, port: int, threads: int | None, deadline_s: float = FRAME_DEADLINE_S,
+            moving_pixels: int = MOVING_PIXELS):
     """The uvicorn server of ``path``'s preview, the preview and its address (with the token a
     server beyond loopback needs)."""
     document = Document.open(path)
@@ -425,7 +432,7 @@ def _server(path, host: str, port: int, threads: int | None, deadline_s: float =
         warnings.warn(XrayrasterWarning(f"the preview listens on {host}, beyond this machine's loopback: anyone who "
                                         "can reach it and has the address with its token can use it; prefer the "
                                         "default 127.0.0.1 and an SSH tunnel"), stacklevel=3)
-    preview = Preview(document, threads, deadline_s)
+    preview = Preview(document, threads, deadline_s, moving_pixels)
     app = make_app(preview, host=host, port=port, token=token)
     url = address(host, port, token)
     # An open page keeps its WebSocket: shutting down waits a second for it, then closes it. No

@@ -2,7 +2,10 @@
 // paints the frames the server sends back (xrayraster/preview/encoding.py), and applies window and
 // level itself. One request is in flight at a time and the newest change waits in its place, so
 // the image follows the hand instead of a queue of stale frames (the server also keeps only the
-// newest request it has not started).
+// newest request it has not started). While an input moves (a slider or the image dragged) the
+// requests say so ("moving": true) and the server answers with a reduced frame, the detector binned
+// to fewer pixels, which the canvas stretches to the full frame's size; SETTLE_MS after the last
+// such input the page asks for the full frame. The label above the image says which it shows.
 "use strict";
 
 const $ = (id) => document.getElementById(id);
@@ -11,9 +14,17 @@ const query = token ? `?token=${encodeURIComponent(token)}` : "";
 const state = { edits: {}, view: { output: "lineint", material: 0, noise: false, seed: 0, angle_deg: null } };
 // window.xrPreview, read by tests and scripts/bench_preview.py: the frame shown, frames painted, and
 // each painted frame's latency from the first input event it answers to its paint (ms).
-const preview = { state, frame: null, painted: 0, window: null, latencies: [] };
+// paintedAt: when the last frame was painted; reduced: the last reduced frame painted, and
+// paintedReduced how many were.
+const preview = { state, frame: null, painted: 0, paintedReduced: 0, paintedAt: null, reduced: null, window: null,
+  latencies: [] };
 window.xrPreview = preview;
 let socket = null, nextId = 1, inFlight = null, pending = false, inputAt = {}, firstInput = null;
+// The input counts as moving until it has been still for SETTLE_MS (a hand on a 60 Hz display moves
+// every 17 ms; a slow one every few frames): settleTimer runs meanwhile. sentMoving: whether the
+// last request sent asked for a reduced frame (so the full one is still to ask for).
+const SETTLE_MS = 80;
+let settleTimer = null, sentMoving = false;
 let win = { level: 0, width: 1, auto: true };
 
 function decodeFrame(buffer) {
@@ -32,11 +43,25 @@ function send() {
   if (firstInput === null) firstInput = performance.now();
   if (!socket || socket.readyState !== WebSocket.OPEN) return;
   if (inFlight !== null) { pending = true; return; }
-  const id = nextId++;
+  const id = nextId++, moving = settleTimer !== null;
   inFlight = id;
   inputAt[id] = firstInput;
   firstInput = null;
-  socket.send(JSON.stringify({ id, edits: state.edits, view: state.view }));
+  sentMoving = moving;
+  socket.send(JSON.stringify({ id, edits: state.edits, view: state.view, moving }));
+}
+
+function moved() {  // an input that moves on (a slider or the image dragged): reduced frames until it stops
+  clearTimeout(settleTimer);
+  settleTimer = setTimeout(settled, SETTLE_MS);
+}
+
+function settled() {  // the input has stopped: the full frame, unless it is asked for or shown already
+  settleTimer = null;
+  // A detector too small to reduce answers a moving request with its full frame: nothing to ask for.
+  const f = preview.frame, last = nextId - 1;
+  const shownFull = inFlight === null && f !== null && f.header.id === last && (f.header.binning || 1) === 1;
+  if (sentMoving && !shownFull) send();  // with a frame in flight, sent (in full) when that one comes back
 }
 
 function received(event) {
@@ -61,8 +86,10 @@ function received(event) {
   const now = performance.now(), latency = now - inputAt[frame.header.id];
   preview.latencies.push(latency);
   preview.pageMs = now - arrived;
-  $("timing").textContent = `frame ${frame.header.id}: ${stages} ms on the server, ${ms((now - arrived) / 1000)} ms ` +
-    `in the page; ${latency.toFixed(0)} ms from input to paint`;
+  preview.paintedAt = now;
+  const [rows, cols] = frame.header.shape;
+  $("timing").textContent = `frame ${frame.header.id} (${rows} × ${cols}): ${stages} ms on the server, ` +
+    `${ms((now - arrived) / 1000)} ms in the page; ${latency.toFixed(0)} ms from input to paint`;
   $("command").textContent = frame.header.command;
   done(frame.header.id);
 }
@@ -77,9 +104,17 @@ function done(id) {
 function paint() {
   const frame = preview.frame;
   if (!frame) return;
-  const [rows, cols] = frame.header.shape;
+  const [rows, cols] = frame.header.shape, binning = frame.header.binning || 1;
   const canvas = $("image");
   if (canvas.width !== cols || canvas.height !== rows) { canvas.width = cols; canvas.height = rows; }
+  // A reduced frame is stretched to the full one's size on screen (the canvas's CSS size), smoothly.
+  canvas.classList.toggle("reduced", binning > 1);
+  if (binning > 1) { preview.reduced = frame; preview.paintedReduced++; }
+  const [fullRows, fullCols] = frame.header.full_shape || frame.header.shape;
+  $("resolution").textContent = binning > 1
+    ? `preview: 1/${binning} resolution while moving (${rows} × ${cols} of ${fullRows} × ${fullCols} pixels)`
+    : `full resolution (${rows} × ${cols} pixels)`;
+  $("resolution").className = binning > 1 ? "reduced" : "full";
   preview.window = win;
   const lut = new Uint8ClampedArray(65536), low = win.level - win.width / 2;
   for (let q = 0; q < 65536; q++) lut[q] = Math.round(255 * (value(frame, q) - low) / win.width);
@@ -183,12 +218,14 @@ function readout(event) {
   const col = Math.floor((event.clientX - box.left) * canvas.width / box.width);
   const row = Math.floor((event.clientY - box.top) * canvas.height / box.height);
   if (row < 0 || col < 0 || row >= canvas.height || col >= canvas.width) return;
-  const v = value(frame, frame.levels[row * canvas.width + col]);
-  $("readout").textContent = `row ${row}, column ${col}: ${v.toPrecision(5)} ${frame.header.unit} (${frame.header.quantity})`;
+  const v = value(frame, frame.levels[row * canvas.width + col]), binning = frame.header.binning || 1;
+  const where = binning > 1 ? `binned row ${row}, column ${col} (1/${binning} resolution)` : `row ${row}, column ${col}`;
+  $("readout").textContent = `${where}: ${v.toPrecision(5)} ${frame.header.unit} (${frame.header.quantity})`;
 }
 
 function setAngle(degrees, from) {
   const a = ((degrees % 360) + 360) % 360;
+  if (from === "slider" || from === "drag") moved();
   state.view.angle_deg = a;
   if (from !== "slider") $("angle").value = a;
   if (from !== "number") $("angle-value").value = a.toFixed(2);
@@ -222,7 +259,7 @@ function hello(message) {
       state.edits[c.key] = v;
       send();
     };
-    slider.addEventListener("input", () => change(slider.value, number));
+    slider.addEventListener("input", () => { moved(); change(slider.value, number); });
     number.addEventListener("change", () => change(number.value, slider));
     const pair = document.createElement("span");
     pair.className = "pair";
