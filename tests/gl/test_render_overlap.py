@@ -200,3 +200,16 @@ def test_terms_with_more_triangles_than_rays_leave_the_sort(render):
     sorted_ = render(geom, scene)
     assert render.method == "resolve"
     assert np.abs(render(geom, scene, overlap="nested") - sorted_).max() <= 1e-4
+
+
+def test_interpenetrating_scenes_search_for_terms_only_where_they_can_pay():
+    """A woven sample's method without the overlap search: the sort where its triangles (about its
+    terms' own) outnumber the rays, else auto (which may then draw the terms)."""
+    from xrayraster.gl.pathlengths import interpenetrating_overlap
+
+    scene = xr.Scene()
+    scene.add(trimesh.creation.icosphere(3, 4.0), "a", name="a")  # 1280 triangles
+    small = xr.ConeBeamGeometry(SOD, SDD, (32, 32), PIXEL, [THETA])  # 1024 rays
+    large = xr.ConeBeamGeometry(SOD, SDD, (32, 40), PIXEL, [THETA])  # 1280 rays
+    assert interpenetrating_overlap(scene, small) == "resolve"
+    assert interpenetrating_overlap(scene, large) == "auto"

@@ -26,6 +26,7 @@ from ..core.projections import Projections
 from ..core.provenance import package_version
 from ..core.tiff import quicklook_path
 from ..gl.context import GLContext
+from ..gl.pathlengths import interpenetrating_overlap
 from ..gl.voxelize import LabelVolume, voxelize
 from ..io.scan_file import ScanFile, load_scan_file
 from ..physics.detector import Detector
@@ -124,12 +125,12 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False, a
     seconds = dict.fromkeys(STAGES, 0.0)  # projections and fdk take turns, so each is a sum
     with _timed(seconds, "sample"):
         scene = loaded.sample_scene(progress=progress is True)
-    # A woven sample's yarns interpenetrate (docs/weave.md), so its renderer resolves overlaps by
-    # priority without first searching the meshes for them (seconds at a million triangles).
-    overlap = "resolve" if loaded.weave is not None else "auto"
+    scanned = loaded.with_mount(scene)
+    # A woven sample's yarns interpenetrate (docs/weave.md): one pass where its overlap terms pay,
+    # else the sort without first searching the meshes for overlaps.
+    overlap = interpenetrating_overlap(scanned, loaded.geometry) if loaded.weave is not None else "auto"
     with Renderer(loaded.geometry, overlap=overlap, context=gl, threads=threads) as renderer, \
             (nullcontext(cl) if cl is not None else CLContext()) as cl:
-        scanned = loaded.with_mount(scene)
         with _timed(seconds, "fdk"):
             # Nothing outside the sample and its mount attenuates: the displaced-detector weights
             # weigh that reach (recon/fdk_weights.py), not the grid's.

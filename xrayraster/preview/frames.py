@@ -29,6 +29,7 @@ from ..core.estimate import plan
 from ..core.geometry import VectorGeometry
 from ..core.projections import Projections
 from ..gl.context import GLContext
+from ..gl.pathlengths import interpenetrating_overlap
 from ..physics.detector import Detector
 from ..pipeline.plan import FrameJob
 from ..recon.opencl import CLContext
@@ -136,7 +137,7 @@ class Previewer:
                               f"{len(scene.materials)} materials (0 to {len(scene.materials) - 1})")
         factor = binning(loaded.geometry.detector_shape, self.moving_pixels) if moving else 1
         geometry = binned(turned(loaded.geometry, view.angle_deg), factor)
-        return loaded, scene, self._renderer_for(geometry, document, factor)
+        return loaded, scene, self._renderer_for(geometry, document, scene, factor)
 
     @staticmethod
     def _options(document: Document, view: View, loaded) -> dict:
@@ -170,10 +171,11 @@ class Previewer:
             self._sample = (key, scene)
         return self._sample[1]
 
-    def _renderer_for(self, geometry, document: Document, factor: int = 1) -> Renderer:
+    def _renderer_for(self, geometry, document: Document, scene, factor: int = 1) -> Renderer:
         """The renderer of frames binned ``factor`` × ``factor`` (1: full frames), pointed at ``geometry``."""
-        # A woven sample's yarns interpenetrate: its renderer resolves overlaps as xrayraster scan's does.
-        overlap = "resolve" if document.kind == "scan" and "weave" in document.table else "auto"
+        # A woven sample's yarns interpenetrate: its renderer picks as xrayraster scan's does.
+        woven = document.kind == "scan" and "weave" in document.table
+        overlap = interpenetrating_overlap(scene, geometry) if woven else "auto"
         renderer = self._renderers.get(factor)
         if renderer is not None and renderer.overlap != overlap:
             renderer.release()
