@@ -31,6 +31,16 @@ def test_egl_and_osmesa_render_the_same_exact_lengths(gl, request):
     assert cube_error(osmesa) <= 1e-4
 
 
+def test_renderers_one_after_another_on_one_context_leave_no_gl_error(gl):
+    """Renderers made one after another on one context: moderngl rebinds the framebuffer bound
+    last when it makes one, and a released renderer's was deleted, which GL refuses
+    (GL_INVALID_OPERATION, met by the next error check)."""
+    for _ in range(3):
+        assert cube_error(gl) <= 1e-4
+        with gl.current():
+            assert gl.ctx.error == "GL_NO_ERROR"
+
+
 def test_programs_are_compiled_once_per_context(gl):
     first = gl.compute("pathlength_small.comp", {"MAX_SMALL_PIXELS": 4})
     assert gl.compute("pathlength_small.comp", {"MAX_SMALL_PIXELS": 4}) is first

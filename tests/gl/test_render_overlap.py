@@ -190,12 +190,15 @@ def test_partial_overlaps_render_in_one_pass_unless_four_objects_share_space(ren
         render(GEOM, scene, overlap="nested")
 
 
-def test_terms_with_more_triangles_than_rays_leave_the_sort(render):
-    """A 4×4 detector: two overlapping balls' intersection has more triangles than the 16 rays cost to sort."""
+def test_terms_with_more_triangles_than_twice_the_rays_leave_the_sort(render):
+    """A 4×4 detector: two overlapping balls' intersection has more triangles than twice the 16 rays,
+    which cost less to sort."""
+    from xrayraster.gl.pathlengths import TERM_TRIANGLES_PER_RAY
+
     scene = xr.Scene()
     for k, name in enumerate("ab"):
         scene.add(trimesh.creation.icosphere(3, 4.0).apply_translation([3.0 * k, 0, 0]), name, priority=k, name=name)
-    assert sum(len(t.mesh.faces) for t in scene.one_pass().terms) > 16
+    assert sum(len(t.mesh.faces) for t in scene.one_pass().terms) > TERM_TRIANGLES_PER_RAY * 16
     geom = xr.ConeBeamGeometry(SOD, SDD, (4, 4), 10 * PIXEL, [THETA])
     sorted_ = render(geom, scene)
     assert render.method == "resolve"
@@ -203,9 +206,10 @@ def test_terms_with_more_triangles_than_rays_leave_the_sort(render):
 
 
 def test_interpenetrating_scenes_search_for_terms_only_where_they_can_pay():
-    """A woven sample's method without the overlap search: the sort where its triangles (about its
-    terms' own) outnumber the rays, else auto (which may then draw the terms)."""
-    from xrayraster.gl.pathlengths import interpenetrating_overlap
+    """A woven sample's method without the overlap search: auto (which may then draw the terms)
+    where its triangles are at most the rays, or up to three times them in a scan of at least
+    SEARCH_RAYS rays; else the sort."""
+    from xrayraster.gl.pathlengths import SEARCH_RAYS, interpenetrating_overlap
 
     scene = xr.Scene()
     scene.add(trimesh.creation.icosphere(3, 4.0), "a", name="a")  # 1280 triangles
@@ -213,3 +217,8 @@ def test_interpenetrating_scenes_search_for_terms_only_where_they_can_pay():
     large = xr.ConeBeamGeometry(SOD, SDD, (32, 40), PIXEL, [THETA])  # 1280 rays
     assert interpenetrating_overlap(scene, small) == "resolve"
     assert interpenetrating_overlap(scene, large) == "auto"
+    many = np.linspace(0.0, 2 * np.pi, SEARCH_RAYS // 1024, endpoint=False)
+    assert interpenetrating_overlap(scene, xr.ConeBeamGeometry(SOD, SDD, (32, 32), PIXEL, many)) == "auto"
+    assert interpenetrating_overlap(scene, xr.ConeBeamGeometry(SOD, SDD, (32, 32), PIXEL, many), views=1) == "resolve"
+    tiny = xr.ConeBeamGeometry(SOD, SDD, (16, 16), PIXEL, many)  # 5 triangles a ray: never
+    assert interpenetrating_overlap(scene, tiny) == "resolve"

@@ -39,9 +39,10 @@ from ..core.errors import RenderError, SceneError
 from ..core.geometry import VectorGeometry
 from ..core.memory import available_memory
 from ..scene.scene import Scene
-from .bindings import BINDINGS, TEXTURE_WIDTH, TEXTURES
+from .bindings import BINDINGS, TEXTURES
 from .context import GLContext
 from .rays import view_rays
+from .scene_upload import UploadedScene, texel_rows, upload_scene
 
 log = logging.getLogger("xrayraster")
 
@@ -52,36 +53,6 @@ NODE_STRIPE_BITS = 8  # the node pool's 256 stripes, each with its own counter (
 CANDIDATES_HEADER = 16  # bytes before the candidate entries: their count, pass 1b's work groups
 ENTRY_BYTES = 16  # a candidate entry: a triangle and up to two of its pixels (shaders/candidates.glsl)
 SMALL_TRIANGLE_PIXELS = 64  # measured: 32-128 equally fast on llvmpipe at 256²-2048²
-
-
-@dataclass
-class UploadedScene:
-    """A scene uploaded once (vertices relative to ``ref``) and reused for every view.
-
-    Objects are numbered by rank (priority, then insertion), so a resolve pass can compare
-    owners by index; every triangle carries its object's number. The scene's overlap terms, when
-    uploaded (:meth:`Scene.one_pass`: a one-pass sum with partial overlaps), follow the objects,
-    numbered from ``len(ranked)``.
-    """
-
-    scene: Scene
-    revision: int
-    terms: tuple  # OverlapTerms after the objects (empty unless asked for)
-    ref: np.ndarray  # (3,) mm: the point all uploaded positions are relative to
-    triangles: moderngl.Texture  # 3 RGBA32F texels per triangle: corners (mm, relative to ref), object in w
-    objects: moderngl.Texture  # RGBA32UI per object: channel, drawn in this view, container channel + 1, label
-    large: moderngl.Buffer  # indirect draw command + indices of the triangles pass 2 draws
-    large_corners: moderngl.Buffer  # the six window-space corners pass 2 draws for each
-    ranked: list  # SceneObjects by rank
-    channels: np.ndarray  # channel of each object by rank, then of each term (its first member's)
-    num_channels: int
-    num_triangles: int
-    fixed_scale: float  # fixed-point units per mm of the sum accumulators
-    corners: np.ndarray  # (8, 3) bounding-box corners relative to ref
-
-    def release(self) -> None:
-        for buffer in (self.triangles, self.objects, self.large, self.large_corners):
-            buffer.release()
 
 
 class CrossingEngine:
@@ -119,56 +90,8 @@ class CrossingEngine:
         if cached is not None:
             cached.release()
             self._scene = None
-        bounds = scene.bounds
-        ref = bounds.mean(axis=0)
-        materials = scene.materials
-        ranked = sorted(scene.objects, key=lambda o: o.rank)
-        meshes = [o.mesh for o in ranked] + [t.mesh for t in terms]
-        num_triangles = sum(len(m.faces) for m in meshes)
-        texels = _texel_rows(3 * num_triangles, 4, np.float32)  # filled in place: no list of copies
-        soup = texels[:3 * num_triangles].reshape(num_triangles, 3, 4)
-        start = 0
-        for number, mesh in enumerate(meshes):
-            part = soup[start:start + len(mesh.faces)]
-            part[:, :, :3] = (mesh.vertices - ref).astype(np.float32)[mesh.faces]
-            part[:, 0, 3] = np.array(number, np.uint32).view(np.float32)
-            start += len(part)
-        soup[:] = soup[_by_size(soup[:, :, :3])]
-        # Fixed point: the largest total (one bounding-box diagonal) must stay below 2^31 units.
-        diagonal = float(np.linalg.norm(bounds[1] - bounds[0]))
-        fixed_scale = 2.0 ** np.floor(np.log2(2.0**30 / diagonal))
-        ctx = self.gl.ctx
-        corners = np.array([[x, y, z] for x in bounds[:, 0] for y in bounds[:, 1] for z in bounds[:, 2]]) - ref
-        objects = scene.objects
-        self._scene = UploadedScene(
-            scene=scene,
-            revision=scene.revision,
-            terms=terms,
-            ref=ref,
-            triangles=self._texture(texels, "f4", f"the scene's {num_triangles} triangles"),
-            objects=self._texture(_texel_rows(len(meshes), 4, np.uint32), "u4", f"the scene's {len(meshes)} objects"),
-            large=ctx.buffer(reserve=4 * (4 + num_triangles)),
-            large_corners=ctx.buffer(reserve=6 * 8 * num_triangles),
-            ranked=ranked,
-            channels=np.array([materials.index(o.material) for o in ranked]
-                              + [materials.index(objects[t.members[0]].material) for t in terms], np.uint32),
-            num_channels=len(materials),
-            num_triangles=num_triangles,
-            fixed_scale=float(fixed_scale),
-            corners=corners,
-        )
+        self._scene = upload_scene(self.gl, scene, terms)
         return self._scene
-
-    def _texture(self, texels: np.ndarray, dtype: str, what: str) -> moderngl.Texture:
-        """Rows of ``TEXTURE_WIDTH`` texels (:func:`_texel_rows`) as a texture read by ``texelFetch``."""
-        rows = len(texels) // TEXTURE_WIDTH
-        limit = int(self.gl.ctx.info["GL_MAX_TEXTURE_SIZE"])
-        if rows > limit:
-            raise RenderError(f"{what} need a texture of {rows} rows of {TEXTURE_WIDTH} texels, more than this GL "
-                              f"driver's {limit}: use a coarser mesh or fewer objects")
-        texture = self.gl.ctx.texture((TEXTURE_WIDTH, rows), 4, texels, dtype=dtype)
-        texture.filter = (moderngl.NEAREST, moderngl.NEAREST)  # no mipmaps: complete for texelFetch
-        return texture
 
     def object_table(self, uploaded: UploadedScene, view: int, skip=None) -> np.ndarray:
         """``(objects + terms, 4)`` uint32 by rank: channel, drawn (0 when wholly behind the source or
@@ -221,7 +144,7 @@ class CrossingEngine:
         tests), then pass 2 (rasteriser: the large triangles pass 1 listed). When pass 1 listed
         more candidate entries than the buffer holds, the buffer grows and the view runs again
         after ``reset()``, which must undo what the crossings of the cut-short run recorded."""
-        texels = _texel_rows(len(table), 4, np.uint32)
+        texels = texel_rows(len(table), 4, np.uint32)
         texels[:len(table)] = table
         uploaded.objects.write(texels)
         rays = view_rays(self.geometry, view, uploaded.ref)
@@ -399,6 +322,10 @@ class CrossingEngine:
             if self._scene is not None:
                 self._scene.release()
                 self._scene = None
+            if "framebuffer" in self._buffers:
+                # moderngl rebinds the framebuffer bound last after making one (empty_framebuffer): bound
+                # and then deleted, ours would be a name GL refuses (GL_INVALID_OPERATION) to the next engine.
+                self.gl.ctx.detect_framebuffer(0).use()
             for buffer in self._buffers.values():
                 buffer.release()
             self._buffers = {}
@@ -433,23 +360,6 @@ class CrossingLists:
 
     def __exit__(self, *exc) -> None:
         self.release()
-
-
-def _by_size(corners: np.ndarray) -> np.ndarray:
-    """The order of triangles ``(n, 3, 3)`` by their longest edge's largest coordinate span (mm).
-    Crossing pass 1 loops over each triangle's pixel box, and the SIMD lanes of a software
-    rasteriser (8 triangles at once on llvmpipe) all wait for the longest box among them: with
-    triangles of like sizes side by side, a view's pass 1 and 1b took about a tenth less CPU
-    (BENCHMARKS.md). Lengths and labels do not depend on the order (each triangle carries its
-    object; sums are exact, lists sorted)."""
-    size = np.abs(np.roll(corners, 1, axis=1) - corners).max(axis=(1, 2))
-    return np.argsort(size, kind="stable")
-
-
-def _texel_rows(count: int, channels: int, dtype) -> np.ndarray:
-    """Zeros for ``count`` texels, ``(rows × TEXTURE_WIDTH, channels)``: whole texture rows."""
-    rows = max(1, -(-count // TEXTURE_WIDTH))
-    return np.zeros((rows * TEXTURE_WIDTH, channels), dtype)
 
 
 def set_uniforms(prog, values: dict) -> None:

@@ -35,15 +35,20 @@ from ..core.geometry import VectorGeometry, as_vector_geometry
 from ..core.memory import available_memory
 from ..scene.scene import Scene
 from .context import GLContext
-from .crossings import (
-    MIN_CROSSINGS,
-    NODE_BYTES,
-    SMALL_TRIANGLE_PIXELS,
-    CrossingEngine,
-    UploadedScene,
-)
+from .crossings import MIN_CROSSINGS, NODE_BYTES, SMALL_TRIANGLE_PIXELS, CrossingEngine
+from .scene_upload import UploadedScene
 
 log = logging.getLogger("xrayraster")
+
+#: Overlap terms are drawn while their triangles are at most this many a ray; past it the per-pixel
+#: sort is cheaper. Measured on llvmpipe (2 cores, ``scripts/bench_one_pass.py``): the one pass was
+#: 1.2-1.7x faster than the sort at 0.2-1.2 terms' triangles a ray (twin_small at 256² and 512²,
+#: the twin at 512²) and 0.8-0.9x at 3.0 (twin_small at 128²). On a GPU, where the sort is 3-16x
+#: slower than a sum (BENCHMARKS.md), the break-even can only lie further out.
+TERM_TRIANGLES_PER_RAY = 2
+#: Rays of a whole scan (views × pixels) from which a woven scene with up to three triangles a ray
+#: is searched for overlap terms (:func:`interpenetrating_overlap`): 2^26, about 67 million.
+SEARCH_RAYS = 1 << 26
 
 
 class PathLengthRenderer:
@@ -186,10 +191,10 @@ class PathLengthRenderer:
             method, why = "nested", f"{len(pairs)} overlapping pairs, each one object inside another"
         elif (one_pass := scene.one_pass()) is None:
             method, why = "resolve", f"{len(pairs)} overlapping pairs, some partial beyond what one pass can render"
-        elif (extra := sum(len(t.mesh.faces) for t in one_pass.terms)) > (pixels := self._pixels()):
+        elif (extra := sum(len(t.mesh.faces) for t in one_pass.terms)) > TERM_TRIANGLES_PER_RAY * (pixels := self._pixels()):
             method, why = "resolve", (f"{len(pairs)} overlapping pairs, some partial: their {len(one_pass.terms)} "
                                       f"intersection meshes' {extra} triangles would cost more than sorting "
-                                      f"{pixels} pixels' crossings")
+                                      f"{pixels} rays' crossings")
         else:
             method, why = "nested", (f"{len(pairs)} overlapping pairs, the partial ones as {len(one_pass.terms)} "
                                      f"signed intersection meshes ({extra} triangles)")
@@ -199,12 +204,10 @@ class PathLengthRenderer:
         return method
 
     def _pixels(self) -> int:
-        """The rays of a view (pixels times supersampling²). The overlap terms pay per triangle and the
-        per-pixel sort per ray: on llvmpipe (2 cores) the woven twin_small's 50 k terms' triangles
-        cost as much as sorting 256² pixels, and half as much at 512²; on a GPU the sort is slower
-        still (BENCHMARKS.md). So terms are drawn when their triangles are at most the rays."""
+        """The rays of a view (pixels times supersampling²)."""
         rows, cols = self._render_vec.detector_shape
         return rows * cols
+
 
     def _resolve(self, uploaded: UploadedScene, view: int, table: np.ndarray) -> np.ndarray:
         rows, cols = self._render_vec.detector_shape
@@ -218,14 +221,27 @@ class PathLengthRenderer:
         return data.reshape(nch, rows, cols).copy()
 
 
-def interpenetrating_overlap(scene: Scene, geometry) -> str:
+def interpenetrating_overlap(scene: Scene, geometry, views: int | None = None) -> str:
     """The overlap method for a scene whose objects are known to cut into each other (a woven
-    sample's yarns): ``"auto"`` where its overlap terms can pay (their triangles, about the scene's
-    own for a weave, at most the view's rays: :meth:`PathLengthRenderer._pixels`' rule), else
-    ``"resolve"`` at once, without the overlap search (seconds at a million triangles) that could
-    only end in the sort."""
-    rows, cols = as_vector_geometry(geometry).detector_shape
-    return "auto" if scene.num_triangles <= rows * cols else "resolve"
+    sample's yarns): ``"auto"`` where the overlap search (manifold3d's booleans, 3-6 µs a triangle
+    on 2 cores) may find terms that pay, else ``"resolve"`` at once, without a search that could
+    only end in the sort.
+
+    A weave's terms hold 0.45 (the twin, 700 k triangles) to 1.06 (twin_small, 47 k) of its own
+    triangles, so they can pay (:data:`TERM_TRIANGLES_PER_RAY`) where the scene's triangles are at
+    most the rays, or a few times them. Beyond the rays the search is made only for scans of at least
+    :data:`SEARCH_RAYS` rays in all, where it is under a twentieth of the GL time: the twin (801
+    views of 512², 2.67 triangles a ray) searches in 1.9 s and then renders 15 % faster a view;
+    a 128³ dataset sample (180 views of 128², 2.9 a ray) would search for 0.27 s, half its GL time,
+    to find terms twice too many for its rays. ``views``: how many views will be rendered (default
+    the geometry's; a preview, which must show its first frame soon, passes 1)."""
+    vec = as_vector_geometry(geometry)
+    rays = vec.detector_shape[0] * vec.detector_shape[1]
+    views = vec.num_views if views is None else views
+    triangles = scene.num_triangles
+    if triangles <= rays or (triangles <= 3 * rays and rays * views >= SEARCH_RAYS):
+        return "auto"
+    return "resolve"
 
 
 def _nesting_columns(nesting: list[int | None], uploaded: UploadedScene) -> np.ndarray:

@@ -24,7 +24,7 @@ from ..simulate.estimate import seconds_per_view
 from ..weave.size import SECONDS_PER_TRIANGLE as MESH_SECONDS_PER_TRIANGLE
 from ..weave.size import estimated_triangles, mesh_part
 
-SECONDS_PER_VOXEL_VIEW = 1.1e-9  # FDK: 119.5 s / (801 views × 512³ voxels)
+SECONDS_PER_VOXEL_VIEW = 1.6e-10  # FDK: 15.1-17.9 s / (801 views × 512³ voxels), the twin on 2 cores, 2026-11-27
 SECONDS_PER_VOXEL_LABEL = 1.4e-8  # labels: 1.4 s / 512³ (1.9 s in bench_voxelize)
 #: Bytes a triangle of the scanned scene holds: the meshes, the scene's placed copies and the GL
 #: upload. The twin's 1,260 MiB peak less its volume, labels, one batch and the 347 MiB of a tiny

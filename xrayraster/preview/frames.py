@@ -173,9 +173,9 @@ class Previewer:
 
     def _renderer_for(self, geometry, document: Document, scene, factor: int = 1) -> Renderer:
         """The renderer of frames binned ``factor`` × ``factor`` (1: full frames), pointed at ``geometry``."""
-        # A woven sample's yarns interpenetrate: its renderer picks as xrayraster scan's does.
+        # A woven sample's yarns interpenetrate: its renderer picks as xrayraster scan's does for one view.
         woven = document.kind == "scan" and "weave" in document.table
-        overlap = interpenetrating_overlap(scene, geometry) if woven else "auto"
+        overlap = interpenetrating_overlap(scene, geometry, views=1) if woven else "auto"
         renderer = self._renderers.get(factor)
         if renderer is not None and renderer.overlap != overlap:
             renderer.release()

@@ -83,11 +83,26 @@ def pre_weights(vectors, toward_axis, redundancy, rows: int, cols: int, cone: bo
     no (views, rows, cols, 3) array is made."""
     if not cone:
         return np.broadcast_to(redundancy[:, None, :], (len(redundancy), rows, cols)).astype(np.float32)
+    cosine = cosine_weights(vectors, toward_axis, rows, cols)
+    return np.multiply(cosine, redundancy[:, None, :], dtype=np.float32)
+
+
+def cosine_weights(vectors, toward_axis, rows: int, cols: int) -> np.ndarray:
+    """(views or 1, rows, cols) float64: the cosine weight ŝ·(p − s) / |p − s| of each pixel. It
+    depends on a view only through nine dot products of its source, detector and ŝ; where every
+    view has view 0's (a circular orbit: each view is view 0 turned, equal to float rounding,
+    relative 1e-12), one plane serves them all. That is 1/32 of the work of a twin's batch, whose
+    weights, made per view, had taken half its filtering time (0.17 of 0.34 s, 32 views of 512²)."""
     s, d, u, v = (vectors[:, 3 * k : 3 * k + 3] for k in range(4))
     a = d - s
+    dot = lambda x, y: np.einsum("ij,ij->i", x, y)[:, None, None]  # noqa: E731 - per view
+    terms = np.concatenate([dot(x, y)[:, :, 0] for x, y in ((a, a), (v, v), (a, v), (u, u), (a, u), (u, v),
+                                                              (a, toward_axis), (v, toward_axis), (u, toward_axis))],
+                           axis=1)
+    if np.all(np.abs(terms - terms[0]) <= 1e-12 * np.abs(terms).max()):
+        a, u, v, toward_axis = a[:1], u[:1], v[:1], toward_axis[:1]
     c = (np.arange(cols) - 0.5 * (cols - 1))[None, None, :]
     r = (np.arange(rows) - 0.5 * (rows - 1))[None, :, None]
-    dot = lambda x, y: np.einsum("ij,ij->i", x, y)[:, None, None]  # noqa: E731 - per view
     # The terms that vary along one axis only are summed before the (views, rows, cols) arrays are
     # made, and the cross term is left out where u ⟂ v (every circular scan): a third of the time.
     squared = (dot(a, a) + r * r * dot(v, v) + 2 * r * dot(a, v)) + (c * c * dot(u, u) + 2 * c * dot(a, u))
@@ -100,5 +115,4 @@ def pre_weights(vectors, toward_axis, redundancy, rows: int, cols: int, cone: bo
     if across.any():  # 0 unless the source is offset sideways (or the detector turned): no third full array
         along = along + c * across
     np.divide(along, squared, out=squared)
-    squared *= redundancy[:, None, :]
-    return squared.astype(np.float32)
+    return squared
