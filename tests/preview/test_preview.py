@@ -35,7 +35,8 @@ from xrayraster.preview.document import Document, View  # noqa: E402
 from xrayraster.preview.encoding import LEVELS, decode, encode  # noqa: E402
 from xrayraster.preview.frames import MOVING_PIXELS, Frame, Previewer, binned, binning, turned  # noqa: E402
 from xrayraster.preview.notebook import free_port  # noqa: E402
-from xrayraster.preview.server import Background, Preview, make_app  # noqa: E402
+from xrayraster.preview.server import Background, make_app  # noqa: E402
+from xrayraster.preview.session import Preview  # noqa: E402
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 

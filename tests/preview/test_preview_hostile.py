@@ -27,7 +27,8 @@ from starlette.testclient import TestClient  # noqa: E402
 from xrayraster.core.errors import ConfigError  # noqa: E402
 from xrayraster.preview.document import Document, View  # noqa: E402
 from xrayraster.preview.notebook import free_port  # noqa: E402
-from xrayraster.preview.server import Background, Preview, make_app  # noqa: E402
+from xrayraster.preview.server import Background, make_app  # noqa: E402
+from xrayraster.preview.session import Preview  # noqa: E402
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 TIMEOUT_S = 60

@@ -323,7 +323,7 @@ def test_bad_input_is_refused_with_the_fix(cl):
 
 
 def test_host_memory_is_checked_before_any_work():
-    from xrayraster.recon.fdk_stream import plan_memory
+    from xrayraster.recon.fdk_plan import plan_memory
     from xrayraster.recon.fdk_weights import fdk_views
 
     views = fdk_views(CASES["full"], SMALL_VOLUME)

@@ -103,10 +103,8 @@ class CrossingEngine:
         table[:n, 1] = self._in_front_of_source(uploaded, view)
         if skip is not None:
             table[:n, 1] *= [not skip(o) for o in uploaded.ranked]
-        table[:n, 3] = [o.label for o in uploaded.ranked]
-        position = {o.order: k for k, o in enumerate(uploaded.ranked)}
-        for k, term in enumerate(uploaded.terms):  # inside its members: drawn when they are
-            table[n + k, 1] = table[position[term.members[0]], 1] * (1 if term.sign > 0 else 3)
+        table[:n, 3] = uploaded.labels
+        table[n:, 1] = table[uploaded.term_rows, 1] * uploaded.term_drawn  # inside its members: drawn when they are
         return table
 
     def _in_front_of_source(self, uploaded: UploadedScene, view: int) -> np.ndarray:
@@ -181,7 +179,7 @@ class CrossingEngine:
             candidates.bind_to_storage_buffer(BINDINGS["candidates"])
             uploaded.large.write(np.array([0, 1, 0, 0], np.uint32).tobytes())  # empty draw command
             for prog in (small, groups, tests, large):
-                set_uniforms(prog, {**uniforms, "u_candidate_capacity": capacity})
+                self.gl.set_uniforms(prog, {**uniforms, "u_candidate_capacity": capacity})
             small.run(wide, (triangle_groups + wide - 1) // wide)
             self.gl.ctx.memory_barrier()
             groups.run(1)
@@ -262,7 +260,7 @@ class CrossingEngine:
         counters = self.scratch("counters", 8)
         while True:
             prog = self.gl.compute(shader, {**defines, "MAX_CROSSINGS": self.max_crossings})
-            set_uniforms(prog, uniforms)
+            self.gl.set_uniforms(prog, uniforms)
             uploaded.objects.use(TEXTURES["objects"])
             for name in ("heads", "nodes"):
                 self._buffers[name].bind_to_storage_buffer(BINDINGS[name])
@@ -360,14 +358,3 @@ class CrossingLists:
 
     def __exit__(self, *exc) -> None:
         self.release()
-
-
-def set_uniforms(prog, values: dict) -> None:
-    """Set the uniforms ``prog`` uses (the compiler drops the ones a stage does not read)."""
-    for name, value in values.items():
-        if name not in prog:
-            continue
-        if isinstance(value, np.ndarray):
-            prog[name].write(value.astype(np.float32).tobytes())
-        else:
-            prog[name].value = value

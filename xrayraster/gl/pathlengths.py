@@ -89,6 +89,8 @@ class PathLengthRenderer:
         self._check_size()
         self.engine = CrossingEngine(self._render_vec, self.gl, self.small_triangle_pixels)
         self.last_method: str | None = None
+        self._planned: tuple = (None,)  # (scene, its revision, rays, the plan of _plan)
+        self._columns: tuple = (None,)  # (uploaded scene, its nesting columns)
 
     # -- public API -------------------------------------------------------------------------
 
@@ -104,18 +106,14 @@ class PathLengthRenderer:
         if not -self.vector_geometry.num_views <= view < self.vector_geometry.num_views:
             raise RenderError(f"view {view} is out of range: the geometry has {self.vector_geometry.num_views} views")
         view %= self.vector_geometry.num_views
-        method = self._choose_method(scene)
-        nesting, terms = None, ()
-        if method == "nested":
-            # Without terms only when slivers below the overlap test's tolerance (1e-6) cannot have
-            # them: the overlaps that count are containments, as before terms.
-            one_pass = scene.one_pass()
-            nesting, terms = (one_pass.nesting, one_pass.terms) if one_pass is not None else (scene.nesting(), ())
+        method, nesting, terms = self._plan(scene)
         with self.gl.current():
             uploaded = self.engine.upload(scene, terms)
             table = self.engine.object_table(uploaded, view)
             if method == "nested":
-                drawn, container = _nesting_columns(nesting, uploaded).T
+                if self._columns[0] is not uploaded:
+                    self._columns = (uploaded, _nesting_columns(nesting, uploaded).T)
+                drawn, container = self._columns[1]
                 table[:, 1] *= drawn
                 table[:, 2] = container
             if method == "resolve":
@@ -177,6 +175,21 @@ class PathLengthRenderer:
                 f"detector_shape {self.vector_geometry.detector_shape} × supersampling {self.supersampling} needs at least "
                 f"{need / 2**30:.1f} GiB but only {free / 2**30:.1f} GiB is available; reduce the detector size"
             )
+
+    def _plan(self, scene: Scene) -> tuple:
+        """(method, nesting or None, overlap terms) for ``scene``: chosen once for each revision of the
+        scene and detector, not every view (the choice reads every overlap and term)."""
+        key = (scene, scene.revision, self._pixels())
+        if self._planned[:3] != key:  # a Scene compares by identity
+            method = self._choose_method(scene)
+            nesting, terms = None, ()
+            if method == "nested":
+                # Without terms only when slivers below the overlap test's tolerance (1e-6) cannot have
+                # them: the overlaps that count are containments, as before terms.
+                one_pass = scene.one_pass()
+                nesting, terms = (one_pass.nesting, one_pass.terms) if one_pass is not None else (scene.nesting(), ())
+            self._planned = (*key, (method, nesting, terms))
+        return self._planned[3]
 
     def _choose_method(self, scene: Scene) -> str:
         if self.overlap == "nested" and scene.one_pass() is None:

@@ -38,6 +38,9 @@ class UploadedScene:
     large_corners: moderngl.Buffer  # the six window-space corners pass 2 draws for each
     ranked: list  # SceneObjects by rank
     channels: np.ndarray  # channel of each object by rank, then of each term (its first member's)
+    labels: np.ndarray  # label of each object by rank
+    term_rows: np.ndarray  # each term's first member's row (rank) in the object table
+    term_drawn: np.ndarray  # each term's "drawn" entry while its first member is drawn: 1, or 3 for sign −1
     num_channels: int
     num_triangles: int
     fixed_scale: float  # fixed-point units per mm of the sum accumulators
@@ -72,6 +75,7 @@ def upload_scene(gl: GLContext, scene: Scene, terms: tuple = ()) -> UploadedScen
     ctx = gl.ctx
     corners = np.array([[x, y, z] for x in bounds[:, 0] for y in bounds[:, 1] for z in bounds[:, 2]]) - ref
     objects = scene.objects
+    position = {o.order: k for k, o in enumerate(ranked)}
     return UploadedScene(
         scene=scene,
         revision=scene.revision,
@@ -84,6 +88,9 @@ def upload_scene(gl: GLContext, scene: Scene, terms: tuple = ()) -> UploadedScen
         ranked=ranked,
         channels=np.array([materials.index(o.material) for o in ranked]
                           + [materials.index(objects[t.members[0]].material) for t in terms], np.uint32),
+        labels=np.array([o.label for o in ranked], np.uint32),
+        term_rows=np.array([position[t.members[0]] for t in terms], np.intp),
+        term_drawn=np.array([1 if t.sign > 0 else 3 for t in terms], np.uint32),
         num_channels=len(materials),
         num_triangles=num_triangles,
         fixed_scale=float(fixed_scale),

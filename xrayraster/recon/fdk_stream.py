@@ -1,5 +1,6 @@
 """FDK with the views fed in batches (:class:`FDKStream`): weights, ramp filter and
-backprojection on an OpenCL device, and the memory plan that decides where volume and views live.
+backprojection on an OpenCL device, following the memory plan (:mod:`~xrayraster.recon.fdk_plan`)
+that decides where volume and views live.
 
 The algorithm and its weights are in :mod:`xrayraster.recon.fdk_weights`, the filter in
 :mod:`xrayraster.recon.ramp_filter`, the kernels in ``shaders/fdk_filter.cl`` and
@@ -18,7 +19,6 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -27,6 +27,7 @@ from ..core.errors import ReconstructionError
 from ..core.geometry import as_vector_geometry
 from ..core.memory import available_memory
 from ..core.volume import VolumeGeometry
+from .fdk_plan import MAX_BATCH_VIEWS, plan_memory
 from .fdk_weights import FDKViews, fdk_views
 from .host_filter import filter_rows_host, kernel_extensions
 from .opencl import CLContext
@@ -38,9 +39,7 @@ log = logging.getLogger(__name__)
 
 ZCHUNK = 16  # voxels along z per work-item of the scalar backprojection (shaders/fdk_backproject.cl)
 WINDOW_VOXELS = 64  # voxels along z per work-item of backproject_windowed, at most (measured best on 2 cores)
-SLAB_MULTIPLE = 64  # slabs are cut at multiples of both
 TILE = (16, 16, 1)  # work-group: a 16×16 column of voxels reads a compact patch of every view
-MAX_BATCH_VIEWS = 256  # views per backprojection launch: 48 bytes each of constant memory (96: backproject_columns)
 # Kernel choices, normally automatic; the tests set them to check every path on one device.
 LAYOUT = "auto"  # filtered views by "rows" (GPUs), by "columns" (CPUs), or "auto" by device type
 WINDOW_LANES = "auto"  # backproject_windowed's vector width where it applies (x86 CPUs, upright detectors):
@@ -392,64 +391,6 @@ class FDKStream:
                         np.int32(rows), np.int32(cols), np.int32(nx), np.int32(ny), np.int32(depth))
         m_dev.release()
         s_dev.release()
-
-
-@dataclass(frozen=True)
-class _Plan:
-    batch: int  # views per launch
-    slab: int  # z-planes per slab
-    streamed: bool  # the whole volume stays on the device: each batch is backprojected on arrival
-    resident: bool  # else: all filtered views wait on the device (True) or in host memory (False)
-    global_scratch: bool  # a padded row pair does not fit in local memory
-
-
-def plan_memory(views: FDKViews, volume: VolumeGeometry, n_fft: int, device_bytes: int, max_alloc: int,
-                local_bytes: int, host_bytes: int | None, batch_views: int = MAX_BATCH_VIEWS) -> _Plan:
-    """View batches and z-slabs that fit ``device_bytes``; refuses what cannot fit, before any work."""
-    if isinstance(batch_views, bool) or not isinstance(batch_views, (int, np.integer)) or batch_views < 1:
-        raise ReconstructionError(f"batch_views must be a positive integer, got {batch_views!r}")
-    num_views = len(views.scale)
-    rows, cols = views.detector_shape
-    nz, ny, nx = volume.shape
-    filtered = (rows + 2) * (views.filtered_cols + 2) * 4
-    plane = ny * nx * 4
-    global_scratch = n_fft * 8 > local_bytes // 2
-    pairs = (rows + 1) // 2
-    per_view = rows * cols * 4 + filtered + (pairs * n_fft * 8 if global_scratch else 0)  # while filtering
-    most = int(min(num_views, batch_views, MAX_BATCH_VIEWS, max(1, max_alloc // filtered)))
-    max_slab = max_alloc // plane
-    streamed_fit = (device_bytes - nz * plane) // per_view
-    if streamed_fit >= 1 and max_slab >= 1:
-        slab = int(min(nz, max_slab))
-        if SLAB_MULTIPLE <= slab < nz:
-            slab -= slab % SLAB_MULTIPLE
-        plan = _Plan(int(min(most, streamed_fit)), slab, True, False, bool(global_scratch))
-    else:
-        min_slab = min(nz, SLAB_MULTIPLE)
-        batch = int(min(most, (device_bytes - min_slab * plane) // per_view))
-        if batch < 1 or max_slab < 1:
-            raise ReconstructionError(
-                f"the reconstruction does not fit the OpenCL device: one view of {rows}×{cols} pixels and {min_slab} "
-                f"plane(s) of {ny}×{nx} voxels need {_size(per_view + min_slab * plane)}, the plan allows "
-                f"{_size(device_bytes)} (one buffer at most {_size(max_alloc)}); use fewer detector pixels or voxels "
-                "per plane, or a device with more memory")
-        resident = num_views * filtered + batch * per_view + min_slab * plane <= device_bytes
-        room = device_bytes - (num_views * filtered if resident else batch * filtered)
-        slab = int(min(nz, room // plane, max_slab))
-        if SLAB_MULTIPLE <= slab < nz:
-            slab -= slab % SLAB_MULTIPLE
-        plan = _Plan(batch, slab, False, bool(resident), bool(global_scratch))
-    host_need = nz * ny * nx * 4 + (0 if plan.streamed or plan.resident else num_views * filtered)
-    if host_bytes is not None and host_need > host_bytes:
-        raise ReconstructionError(
-            f"the reconstruction needs {_size(host_need)} of host memory (the {nz}×{ny}×{nx} float32 volume"
-            f"{'' if plan.streamed or plan.resident else ' and the filtered projections'}) but {_size(host_bytes)} "
-            "is available; reconstruct a smaller volume (or a part of it with VolumeGeometry.offset)")
-    return plan
-
-
-def _size(nbytes: int) -> str:
-    return f"{nbytes / 2**30:.2f} GiB" if nbytes >= 2**30 else f"{nbytes / 2**20:.1f} MiB"
 
 
 def _view_geometry(views: FDKViews) -> np.ndarray:
