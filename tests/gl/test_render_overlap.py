@@ -208,8 +208,8 @@ def test_terms_with_more_triangles_than_twice_the_rays_leave_the_sort(render):
 def test_interpenetrating_scenes_search_for_terms_only_where_they_can_pay():
     """A woven sample's method without the overlap search: auto (which may then draw the terms)
     where its triangles are at most the rays, or up to three times them in a scan of at least
-    SEARCH_RAYS rays; else the sort."""
-    from xrayraster.gl.pathlengths import SEARCH_RAYS, interpenetrating_overlap
+    SEARCH_RAYS_PER_TRIANGLE rays a triangle; else the sort."""
+    from xrayraster.gl.pathlengths import SEARCH_RAYS_PER_TRIANGLE, interpenetrating_overlap
 
     scene = xr.Scene()
     scene.add(trimesh.creation.icosphere(3, 4.0), "a", name="a")  # 1280 triangles
@@ -217,8 +217,11 @@ def test_interpenetrating_scenes_search_for_terms_only_where_they_can_pay():
     large = xr.ConeBeamGeometry(SOD, SDD, (32, 40), PIXEL, [THETA])  # 1280 rays
     assert interpenetrating_overlap(scene, small) == "resolve"
     assert interpenetrating_overlap(scene, large) == "auto"
-    many = np.linspace(0.0, 2 * np.pi, SEARCH_RAYS // 1024, endpoint=False)
-    assert interpenetrating_overlap(scene, xr.ConeBeamGeometry(SOD, SDD, (32, 32), PIXEL, many)) == "auto"
-    assert interpenetrating_overlap(scene, xr.ConeBeamGeometry(SOD, SDD, (32, 32), PIXEL, many), views=1) == "resolve"
+    enough = -(-SEARCH_RAYS_PER_TRIANGLE * 1280 // 1024)  # views of 1024 rays for the search to pay
+    for views, method in ((enough, "auto"), (enough - 1, "resolve")):
+        geometry = xr.ConeBeamGeometry(SOD, SDD, (32, 32), PIXEL, np.linspace(0.0, 2 * np.pi, views, endpoint=False))
+        assert interpenetrating_overlap(scene, geometry) == method
+        assert interpenetrating_overlap(scene, geometry, views=1) == "resolve"
+    many = np.linspace(0.0, 2 * np.pi, 100 * enough, endpoint=False)
     tiny = xr.ConeBeamGeometry(SOD, SDD, (16, 16), PIXEL, many)  # 5 triangles a ray: never
     assert interpenetrating_overlap(scene, tiny) == "resolve"

@@ -46,9 +46,11 @@ log = logging.getLogger("xrayraster")
 #: the twin at 512²) and 0.8-0.9x at 3.0 (twin_small at 128²). On a GPU, where the sort is 3-16x
 #: slower than a sum (BENCHMARKS.md), the break-even can only lie further out.
 TERM_TRIANGLES_PER_RAY = 2
-#: Rays of a whole scan (views × pixels) from which a woven scene with up to three triangles a ray
-#: is searched for overlap terms (:func:`interpenetrating_overlap`): 2^26, about 67 million.
-SEARCH_RAYS = 1 << 26
+#: A woven scene with up to three triangles a ray is searched for overlap terms
+#: (:func:`interpenetrating_overlap`) when its scan has at least this many rays (views × pixels) a
+#: triangle: the search costs 3-6 µs a triangle, and the one pass saves about 40 ns a ray where it
+#: pays (a 256³ dataset sample: 0.42 s of search, then 8.5 against 11.0 ms a view of 256²).
+SEARCH_RAYS_PER_TRIANGLE = 128
 
 
 class PathLengthRenderer:
@@ -236,23 +238,23 @@ class PathLengthRenderer:
 
 def interpenetrating_overlap(scene: Scene, geometry, views: int | None = None) -> str:
     """The overlap method for a scene whose objects are known to cut into each other (a woven
-    sample's yarns): ``"auto"`` where the overlap search (manifold3d's booleans, 3-6 µs a triangle
-    on 2 cores) may find terms that pay, else ``"resolve"`` at once, without a search that could
-    only end in the sort.
+    sample's yarns): ``"auto"`` where the overlap search (manifold3d's booleans) may find terms that
+    pay, else ``"resolve"`` at once, without a search that could only end in the sort.
 
     A weave's terms hold 0.45 (the twin, 700 k triangles) to 1.06 (twin_small, 47 k) of its own
     triangles, so they can pay (:data:`TERM_TRIANGLES_PER_RAY`) where the scene's triangles are at
-    most the rays, or a few times them. Beyond the rays the search is made only for scans of at least
-    :data:`SEARCH_RAYS` rays in all, where it is under a twentieth of the GL time: the twin (801
-    views of 512², 2.67 triangles a ray) searches in 1.9 s and then renders 15 % faster a view;
-    a 128³ dataset sample (180 views of 128², 2.9 a ray) would search for 0.27 s, half its GL time,
-    to find terms twice too many for its rays. ``views``: how many views will be rendered (default
-    the geometry's; a preview, which must show its first frame soon, passes 1)."""
+    most the rays, or a few times them; beyond the rays the search must also pay for itself over the
+    scan's views (:data:`SEARCH_RAYS_PER_TRIANGLE`). Measured: the twin (801 views of 512², 2.7
+    triangles a ray) searches in 1.9 s and then renders 12 % faster a view; a 256³ dataset sample
+    (360 views of 256², 77 k triangles, 1.2 a ray) in 0.42 s, then 23 % faster; a 128³ one (180
+    views of 128², 2.9 a ray) would search for 0.27 s, half its GL time, to find terms twice too
+    many for its rays. ``views``: how many views will be rendered (default the geometry's; a
+    preview, which must show its first frame soon, passes 1)."""
     vec = as_vector_geometry(geometry)
     rays = vec.detector_shape[0] * vec.detector_shape[1]
     views = vec.num_views if views is None else views
     triangles = scene.num_triangles
-    if triangles <= rays or (triangles <= 3 * rays and rays * views >= SEARCH_RAYS):
+    if triangles <= rays or (triangles <= 3 * rays and rays * views >= SEARCH_RAYS_PER_TRIANGLE * triangles):
         return "auto"
     return "resolve"
 
