@@ -19,7 +19,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
-EXAMPLE = "examples/twin_small.toml"  # start-up and scan take 4-5 s on two CPU cores
+EXAMPLE = ROOT / "examples" / "twin_small.toml"
+VIEWS = 600  # instead of its 120, so that the scan runs past the last signal (2-3 s at 120 views, start-up included)
 
 
 def _console_script() -> list[str]:
@@ -34,7 +35,11 @@ def _scan_cut_short(tmp_path: Path, signum: int, after_s: float) -> tuple[int | 
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
     out = tmp_path / "out" / "scan"
     out.parent.mkdir()  # made here so that it can be checked for leftovers whenever the signal comes
-    proc = subprocess.Popen([*_console_script(), "scan", EXAMPLE, "-o", str(out), "--quiet"], cwd=ROOT, env=env,
+    scan_file = tmp_path / "scan.toml"
+    text = EXAMPLE.read_text()
+    assert "num_views = 120" in text
+    scan_file.write_text(text.replace("num_views = 120", f"num_views = {VIEWS}"))
+    proc = subprocess.Popen([*_console_script(), "scan", str(scan_file), "-o", str(out), "--quiet"], cwd=ROOT, env=env,
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     time.sleep(after_s)
     finished = proc.poll() is not None
