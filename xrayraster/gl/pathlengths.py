@@ -223,7 +223,6 @@ class PathLengthRenderer:
         rows, cols = self._render_vec.detector_shape
         return rows * cols
 
-
     def _resolve(self, uploaded: UploadedScene, view: int, table: np.ndarray) -> np.ndarray:
         rows, cols = self._render_vec.detector_shape
         nch = uploaded.num_channels

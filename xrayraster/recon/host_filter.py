@@ -96,9 +96,8 @@ def cosine_weights(vectors, toward_axis, rows: int, cols: int) -> np.ndarray:
     s, d, u, v = (vectors[:, 3 * k : 3 * k + 3] for k in range(4))
     a = d - s
     dot = lambda x, y: np.einsum("ij,ij->i", x, y)[:, None, None]  # noqa: E731 - per view
-    terms = np.concatenate([dot(x, y)[:, :, 0] for x, y in ((a, a), (v, v), (a, v), (u, u), (a, u), (u, v),
-                                                              (a, toward_axis), (v, toward_axis), (u, toward_axis))],
-                           axis=1)
+    pairs = ((a, a), (v, v), (a, v), (u, u), (a, u), (u, v), (a, toward_axis), (v, toward_axis), (u, toward_axis))
+    terms = np.stack([np.einsum("ij,ij->i", x, y) for x, y in pairs], axis=1)  # (views, 9)
     if np.all(np.abs(terms - terms[0]) <= 1e-12 * np.abs(terms).max()):
         a, u, v, toward_axis = a[:1], u[:1], v[:1], toward_axis[:1]
     c = (np.arange(cols) - 0.5 * (cols - 1))[None, None, :]
