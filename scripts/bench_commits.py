@@ -34,6 +34,14 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve()
+# An editable install's finder maps ``xrayraster.shaders`` to this checkout whatever PYTHONPATH
+# says: a tree's code would read this checkout's shaders (an older tree's then fails on newer
+# ones). Every process of a job, the pool's workers too, first runs this sitecustomize from the
+# front of PYTHONPATH, which takes the finder off; a tree's package then reads the tree's shaders/.
+SITECUSTOMIZE = """# Written by scripts/bench_commits.py: a tree's own code and shaders, not the editable install's.
+import sys
+sys.meta_path[:] = [f for f in sys.meta_path if not getattr(f, "__module__", "").startswith("__editable__")]
+"""
 JOBS = ("twin", "build256", "build128r")
 DRAWS = {"source.kvp": {"uniform": [38.0, 42.0]}, "source.mas": {"loguniform": [1.1, 1.4]}}
 BUILDS = {  # job: (samples, what is drawn beside kV and exposure)
@@ -84,9 +92,16 @@ def build_in_this_process(job: str, out: Path) -> dict:
     return {"wall_s": wall, "per_hour": 3600 * count / wall, "steady_per_hour": steady}
 
 
+def tree_env(tree: Path, boot: Path) -> dict:
+    """The environment of a job run with ``tree``'s code and shaders (:data:`SITECUSTOMIZE`, written to ``boot``)."""
+    boot.mkdir(parents=True, exist_ok=True)
+    (boot / "sitecustomize.py").write_text(SITECUSTOMIZE)
+    return {**os.environ, "PYTHONPATH": os.pathsep.join([str(boot), str(tree)])}
+
+
 def run_job(job: str, tree: Path, out: Path) -> dict:
     """``job`` in a fresh process with ``tree``'s code; its figures."""
-    env = {**os.environ, "PYTHONPATH": str(tree)}
+    env = tree_env(tree, out.parent / "boot")
     if job == "twin":
         shutil.rmtree(out, ignore_errors=True)
         start = time.perf_counter()

@@ -1,9 +1,9 @@
 // Where a ray-surface crossing goes. Two variants, chosen by the RESOLVE define:
 //  * sum (default): the signed distance goes into the pixel's 32-bit fixed-point accumulator of
-//    the object's channel (fixed_point.glsl: exact, order-independent sums, so the total is
+//    the triangle's channel (fixed_point.glsl: exact, order-independent sums, so the total is
 //    deterministic), and, for an object nested in another (Scene.nesting), is taken off its
-//    container's channel. An overlap term (scene/overlap_terms.py) whose sign is -1 (drawn = 3)
-//    counts the other way round in both.
+//    container's channel (here, with u_containers; else the host takes whole channels off). An
+//    overlap term (scene/overlap_terms.py) whose sign is -1 counts the other way round in both.
 //  * RESOLVE: the crossing is appended to the pixel's linked list for pathlength_resolve.comp.
 
 #ifdef RESOLVE
@@ -18,7 +18,8 @@ layout(std430, binding = BINDING_NODES) writeonly buffer Nodes { uvec4 nodes[]; 
 layout(std430, binding = BINDING_STRIPES) buffer Stripes { uint stripe_used[]; };       // nodes taken in each stripe
 uniform uint u_stripe_capacity;
 
-void record_crossing(ivec2 px, uint object, int side, float t) {
+void record_crossing(ivec2 px, Triangle tri, int side, float t) {
+    uint object = tri.object;
     uint pixel = uint(px.y) * uint(u_size.x) + uint(px.x);
     uint stripe = (pixel * 2654435761u) >> (32 - NODE_STRIPE_BITS);
     uint k = atomicAdd(stripe_used[stripe], 1u);
@@ -31,14 +32,17 @@ void record_crossing(ivec2 px, uint object, int side, float t) {
 #else
 #include "fixed_point.glsl"
 layout(std430, binding = BINDING_ACCUMULATORS) buffer Accumulators { uint acc[]; };            // (channel, row, col)
+uniform bool u_containers;  // some object's container channel is in the object table (column z)
 
-void record_crossing(ivec2 px, uint object, int side, float t) {
+void record_crossing(ivec2 px, Triangle tri, int side, float t) {
     uint units = fixed_units(t);
-    uvec4 info = object_info(object);  // channel, drawn (3: a term of sign -1), container channel + 1 (0: none)
-    uint value = (side > 0) != ((info.y & 2u) != 0u) ? units : 0u - units;  // exits add t, entries subtract it
+    uint value = (side > 0) != tri.negative ? units : 0u - units;  // exits add t, entries subtract it
     uint pixel = uint(px.y) * uint(u_size.x) + uint(px.x);
     uint npix = uint(u_size.x) * uint(u_size.y);
-    atomicAdd(acc[info.x * npix + pixel], value);
-    if (info.z != 0u) atomicAdd(acc[(info.z - 1u) * npix + pixel], 0u - value);
+    atomicAdd(acc[tri.channel * npix + pixel], value);
+    if (u_containers) {
+        uint container = object_info(tri.object).z;  // container channel + 1, 0: none
+        if (container != 0u) atomicAdd(acc[(container - 1u) * npix + pixel], 0u - value);
+    }
 }
 #endif

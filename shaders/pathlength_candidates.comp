@@ -18,6 +18,6 @@ void main() {
         ivec2 px = ivec2(entry[k] & 0xFFFFu, entry[k] >> 16);
         float t;
         int side = hit_triangle(pixel_ray(vec2(px) + 0.5), tri.a, tri.b, tri.c, t);
-        if (side != 0) record_crossing(px, tri.object, side, t);
+        if (side != 0) record_crossing(px, tri, side, t);
     }
 }

@@ -10,5 +10,5 @@ void main() {
     Triangle tri = fetch_triangle(v_triangle);
     float t;
     int side = hit_triangle(pixel_ray(gl_FragCoord.xy), tri.a, tri.b, tri.c, t);
-    if (side != 0) record_crossing(ivec2(gl_FragCoord.xy), tri.object, side, t);
+    if (side != 0) record_crossing(ivec2(gl_FragCoord.xy), tri, side, t);
 }

@@ -3,16 +3,18 @@
 
 #include "objects.glsl"
 
-// Three texels per triangle, its corners (xyz mm; the first corner's w holds the object number's
-// bits), row by row TEXTURE_WIDTH texels wide: a triangle soup, read in order, costs less than
-// indexed vertices gathered at random, and texels less than storage-buffer elements (objects.glsl).
+// Three texels per triangle, its corners (xyz mm; the corners' w hold, as bits, the object number,
+// its channel, and 1 for an overlap term of sign -1), row by row TEXTURE_WIDTH texels wide: a
+// triangle soup, read in order, costs less than indexed vertices gathered at random, and texels
+// less than storage-buffer elements (objects.glsl). What a crossing records is then in the
+// triangle: the object table is read only where a container channel is subtracted per crossing.
 layout(binding = TEXTURE_TRIANGLES) uniform sampler2D u_triangles;
 
 uniform mat3x4 u_world_to_pixel;  // transposed 3x4: h = P (x - ref, 1); c' = h.x/h.z, r' = h.y/h.z
 uniform ivec2 u_size;             // detector (cols, rows)
 uniform float u_snap_margin;      // px: eight times the rasteriser's largest vertex snap
 
-struct Triangle { vec3 a; vec3 b; vec3 c; uint object; };
+struct Triangle { vec3 a; vec3 b; vec3 c; uint object; uint channel; bool negative; };
 
 // Objects are numbered by rank (priority, then insertion), so `object` also orders ownership.
 vec4 corner(uint texel) {
@@ -20,8 +22,8 @@ vec4 corner(uint texel) {
 }
 
 Triangle fetch_triangle(uint index) {
-    vec4 a = corner(3u * index);
-    return Triangle(a.xyz, corner(3u * index + 1u).xyz, corner(3u * index + 2u).xyz, floatBitsToUint(a.w));
+    vec4 a = corner(3u * index), b = corner(3u * index + 1u), c = corner(3u * index + 2u);
+    return Triangle(a.xyz, b.xyz, c.xyz, floatBitsToUint(a.w), floatBitsToUint(b.w), floatBitsToUint(c.w) != 0u);
 }
 
 vec2 to_window(vec3 x) {

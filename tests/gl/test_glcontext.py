@@ -107,3 +107,62 @@ def test_contexts_interleave_in_one_thread(gl, request):
     assert cube_error(gl) <= 1e-4
     assert cube_error(request.getfixturevalue("osmesa")) <= 1e-4
     assert cube_error(gl) <= 1e-4
+
+
+SPIN = """#version 430
+layout(local_size_x = 64) in;
+layout(std430, binding = 0) buffer Data { float x[]; };
+uniform int u_steps;
+void main() {
+    float s = 0.0;
+    for (int i = 0; i < u_steps; ++i) s += sin(float(i) * x[gl_GlobalInvocationID.x]);
+    x[gl_GlobalInvocationID.x] = s;
+}
+"""
+
+
+def test_dispatches_and_reads_let_other_threads_run(gl):
+    """The calls that do a view's GL work release Python's GIL, so the thread making the last view's
+    radiograph runs meanwhile (moderngl's own calls hold it: no other thread runs a line of Python
+    while llvmpipe computes a dispatch, or while a GPU's read waits)."""
+    import threading
+    import time
+
+    with gl.current():
+        prog = gl.ctx.compute_shader(SPIN)
+        data = gl.ctx.buffer(np.full(64 * 64, 0.5, np.float32).tobytes())
+        try:
+            data.bind_to_storage_buffer(0)
+            steps = 2000
+            while True:  # long enough to see inside: at least 0.2 s
+                prog["u_steps"].value = steps
+                start = time.perf_counter()
+                gl.dispatch(prog, 64)
+                gl.read(data, np.float32, 1)
+                took = time.perf_counter() - start
+                if took >= 0.2 or steps > 1 << 26:
+                    break
+                steps *= 4
+            stamps, stop = [], threading.Event()
+
+            def count():  # pure Python: it needs the GIL for every line
+                while not stop.is_set():
+                    stamps.append(time.perf_counter())
+                    time.sleep(0.001)
+
+            thread = threading.Thread(target=count)
+            thread.start()
+            time.sleep(0.05)
+            start = time.perf_counter()
+            gl.dispatch(prog, 64)
+            gl.barrier()
+            got = gl.read(data, np.float32, 64 * 64)
+            end = time.perf_counter()
+            stop.set()
+            thread.join()
+        finally:
+            data.release()
+            prog.release()
+    assert np.isfinite(got).all()
+    inside = [t for t in stamps if start + 0.25 * (end - start) < t < end - 0.25 * (end - start)]
+    assert len(inside) >= 5, f"{len(inside)} beats of the other thread in the middle half of a {end - start:.2f} s dispatch"

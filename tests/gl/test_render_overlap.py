@@ -131,6 +131,31 @@ def test_nesting_reduces_ownership_to_sums(render):
     assert nested.min() >= 0.0 and resolved[scene.materials.index("yarn")].max() > 1.0
 
 
+def test_a_material_nested_in_two_containers_is_taken_off_each(render):
+    """Rods of one material in two blocks of different materials, and a bar only in the first: one
+    pass takes a channel whose objects share one container off that container as a whole, and one
+    whose objects sit in different containers crossing by crossing. Both against the float64 sweep."""
+    rot = random_rotation(np.random.default_rng(7))
+    boxes = [  # (centre, rotation, size), by rank
+        (rot @ [-4, 0, 0], rot, (7, 12, 12)),
+        (rot @ [4, 0, 0], rot, (7, 12, 12)),
+        (rot @ [-4, -2, 0], rot, (2, 2, 10)),
+        (rot @ [4, 2, 0], rot, (2, 2, 10)),
+        (rot @ [-4, 3, 0], rot, (1.5, 1.5, 10)),
+    ]
+    materials = ["matrix", "resin", "rod", "rod", "bar"]
+    scene = xr.Scene()
+    for k, ((centre, r, size), material) in enumerate(zip(boxes, materials)):
+        box_at(scene, size, centre, r, material, k, f"b{k}")
+    got = render(GEOM, scene)
+    assert render.method == "nested"
+    owned = owned_lengths(boxes, RAYS).reshape(len(boxes), N, N)
+    for channel, material in enumerate(scene.materials):
+        want = sum(owned[k] for k, mk in enumerate(materials) if mk == material)
+        assert np.abs(got[channel] - want).max() <= 1e-4, material
+    assert min(owned[k].max() for k in range(5)) > 1.0  # every box is seen
+
+
 def owned_lengths(boxes, rays):
     """Float64 per-ray length each box owns (the highest rank covering a point owns it): every
     box's one interval along the ray (slab method), swept between the sorted end points."""

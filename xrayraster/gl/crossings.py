@@ -107,8 +107,8 @@ class CrossingEngine:
 
     def object_table(self, uploaded: UploadedScene, view: int, skip=None) -> np.ndarray:
         """``(objects + terms, 4)`` uint32 by rank: channel, drawn (0 when wholly behind the source or
-        ``skip(object)`` is true; a term as its first member, 3 instead of 1 when its sign is −1),
-        0 (a container's channel + 1, set by nested path lengths), label (0 for a term)."""
+        ``skip(object)`` is true; a term as its first member), 0 (a container's channel + 1, set by
+        nested path lengths), label (0 for a term)."""
         n = len(uploaded.ranked)
         table = np.zeros((n + len(uploaded.terms), 4), np.uint32)
         table[:, 0] = uploaded.channels
@@ -116,7 +116,7 @@ class CrossingEngine:
         if skip is not None:
             table[:n, 1] *= [not skip(o) for o in uploaded.ranked]
         table[:n, 3] = uploaded.labels
-        table[n:, 1] = table[uploaded.term_rows, 1] * uploaded.term_drawn  # inside its members: drawn when they are
+        table[n:, 1] = table[uploaded.term_rows, 1]  # inside its members: drawn when they are
         return table
 
     def _in_front_of_source(self, uploaded: UploadedScene, view: int) -> np.ndarray:
@@ -192,16 +192,16 @@ class CrossingEngine:
             uploaded.large.write(np.array([0, 1, 0, 0], np.uint32).tobytes())  # empty draw command
             for prog in (small, groups, tests, large):
                 self.gl.set_uniforms(prog, {**uniforms, "u_candidate_capacity": capacity})
-            small.run(wide, (triangle_groups + wide - 1) // wide)
-            self.gl.ctx.memory_barrier()
-            groups.run(1)
-            self.gl.ctx.memory_barrier()
-            tests.run_indirect(candidates, offset=4)
-            self.gl.ctx.memory_barrier()
+            self.gl.dispatch(small, wide, (triangle_groups + wide - 1) // wide)
+            self.gl.barrier()
+            self.gl.dispatch(groups, 1)
+            self.gl.barrier()
+            self.gl.dispatch_indirect(tests, candidates, offset=4)
+            self.gl.barrier()
             self._empty_framebuffer().use()
-            self._vao(large).render_indirect(uploaded.large, moderngl.TRIANGLES, count=1)
-            self.gl.ctx.memory_barrier()
-            found = int(np.frombuffer(candidates.read(size=4), np.uint32)[0])
+            self.gl.draw_indirect(self._vao(large), uploaded.large, moderngl.TRIANGLES)
+            self.gl.barrier()
+            found = int(self.gl.read(candidates, np.uint32, 1)[0])
             if found <= capacity:
                 return
             self._grow_candidates(found)
@@ -226,16 +226,23 @@ class CrossingEngine:
 
     # -- single pass: signed distances summed per pixel ------------------------------------------
 
-    def accumulate(self, uploaded: UploadedScene, view: int, table: np.ndarray) -> np.ndarray:
+    def accumulate(self, uploaded: UploadedScene, view: int, table: np.ndarray, subtract: tuple = ()) -> np.ndarray:
         """Float32 ``(channels, rows, cols)``: per channel and pixel, the sum of each crossing's
-        signed distance (exits +t, entries −t; a nested object's also off its container's channel)."""
+        signed distance (exits +t, entries −t; a nested object's also off its container's channel,
+        by the shader or, for the ``(container, channel)`` pairs of ``subtract``, here: the container
+        channel less the whole channel, in the same wrapping integers, so the same bits)."""
         rows, cols = self.shape
         size = 4 * uploaded.num_channels * rows * cols
         acc = self.scratch("accumulators", size)
         acc.clear(size)
         acc.bind_to_storage_buffer(BINDINGS["accumulators"])
-        self._record(uploaded, view, table, {}, {"u_fixed_scale": uploaded.fixed_scale}, lambda: acc.clear(size))
-        units = np.frombuffer(acc.read(size=size), dtype=np.int32)
+        uniforms = {"u_fixed_scale": uploaded.fixed_scale, "u_containers": bool(table[:, 2].any())}
+        self._record(uploaded, view, table, {}, uniforms, lambda: acc.clear(size))
+        units = self.gl.read(acc, np.int32, size // 4).reshape(uploaded.num_channels, rows * cols)
+        if subtract:
+            taken = {container: sum(units[c] for k, c in subtract if k == container) for container, _ in subtract}
+            for container, total in taken.items():
+                units[container] -= total
         out = units / uploaded.fixed_scale
         return out.astype(np.float32).reshape(uploaded.num_channels, rows, cols)
 
@@ -259,7 +266,7 @@ class CrossingEngine:
             self._record(uploaded, view, table, {"RESOLVE": 1, "NODE_STRIPE_BITS": NODE_STRIPE_BITS},
                          {"u_stripe_capacity": self._stripe_capacity},
                          lambda: (self._empty_lists(), stripes.write(unused)))
-            used = np.frombuffer(stripes.read(), np.uint32)
+            used = self.gl.read(stripes, np.uint32, 1 << NODE_STRIPE_BITS)
             if used.max() <= self._stripe_capacity:
                 return CrossingLists(self, uploaded)
             self._grow_node_pool(int(used.max()), int(used.sum()))
@@ -280,9 +287,9 @@ class CrossingEngine:
             for name, buffer in outputs.items():
                 buffer.bind_to_storage_buffer(BINDINGS[name])
             counters.write(bytes(8))
-            prog.run((cols + 7) // 8, (rows + 7) // 8, 1)
-            self.gl.ctx.memory_barrier()
-            overflow, depth = np.frombuffer(counters.read(size=8), np.uint32)
+            self.gl.dispatch(prog, (cols + 7) // 8, (rows + 7) // 8, 1)
+            self.gl.barrier()
+            overflow, depth = self.gl.read(counters, np.uint32, 2)
             if not overflow:
                 return
             self.max_crossings = int(2 ** np.ceil(np.log2(depth)))

@@ -96,7 +96,7 @@ class PathLengthRenderer:
         self.engine = CrossingEngine(self._render_vec, self.gl, self.small_triangle_pixels)
         self.last_method: str | None = None
         self._planned: tuple = (None,)  # (scene, its revision, rays, the plan of _plan)
-        self._columns: tuple = (None,)  # (uploaded scene, its nesting columns)
+        self._columns: tuple = (None,)  # (uploaded scene, drawn, container column, host subtractions)
 
     # -- public API -------------------------------------------------------------------------
 
@@ -116,16 +116,17 @@ class PathLengthRenderer:
         with self.gl.current():
             uploaded = self.engine.upload(scene, terms)
             table = self.engine.object_table(uploaded, view)
+            subtract = ()
             if method == "nested":
                 if self._columns[0] is not uploaded:
-                    self._columns = (uploaded, _nesting_columns(nesting, uploaded).T)
-                drawn, container = self._columns[1]
+                    self._columns = (uploaded, *_containers(_nesting_columns(nesting, uploaded), uploaded.channels))
+                _, drawn, container, subtract = self._columns
                 table[:, 1] *= drawn
                 table[:, 2] = container
             if method == "resolve":
                 out = self._resolve(uploaded, view, table)
             else:
-                out = self.engine.accumulate(uploaded, view, table)
+                out = self.engine.accumulate(uploaded, view, table, subtract)
         k = self.supersampling
         if k > 1:
             c, r, q = out.shape
@@ -235,8 +236,7 @@ class PathLengthRenderer:
         with self.engine.record_lists(uploaded, view, table) as lists:
             lists.resolve("pathlength_resolve.comp", {"NUM_CHANNELS": nch},
                           {"u_size": (cols, rows), "u_fixed_scale": uploaded.fixed_scale}, {"output": lengths})
-        data = np.frombuffer(lengths.read(size=4 * nch * rows * cols), dtype=np.float32)
-        return data.reshape(nch, rows, cols).copy()
+        return self.gl.read(lengths, np.float32, nch * rows * cols).reshape(nch, rows, cols)
 
 
 def interpenetrating_overlap(scene: Scene, geometry, views: int | None = None) -> str:
@@ -276,6 +276,23 @@ def _nesting_columns(nesting: list[int | None], uploaded: UploadedScene) -> np.n
         elif container is not None:
             columns[k, 1] = channel[container] + 1
     return columns
+
+
+def _containers(columns: np.ndarray, channels: np.ndarray) -> tuple[np.ndarray, np.ndarray, tuple]:
+    """``columns`` (:func:`_nesting_columns`) split between the shader and the host: where every drawn
+    row of a channel has one container channel (a woven sample's yarns, all in the matrix), the
+    host takes the whole channel off the container's once a view (a ``(container, channel)`` pair)
+    instead of a second atomic add for every crossing (measured: 4 % of a twin_small view at 512²
+    on llvmpipe). Returns drawn, the container column left to the shader, and the pairs."""
+    drawn, container = columns.T.copy()
+    pairs = []
+    for channel in np.unique(channels):
+        rows = (channels == channel) & (drawn != 0)
+        values = np.unique(container[rows])
+        if len(values) == 1 and values[0] != 0:
+            pairs.append((int(values[0]) - 1, int(channel)))
+            container[rows] = 0
+    return drawn, container, tuple(pairs)
 
 
 def _refine(vec: VectorGeometry, k: int) -> VectorGeometry:

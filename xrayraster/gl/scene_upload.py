@@ -1,8 +1,8 @@
 """A scene on the GPU: its triangles and object table as textures, uploaded once and kept for every view.
 
 The crossing engine (:mod:`xrayraster.gl.crossings`) draws from it; the layout is
-``shaders/scene.glsl``'s (three RGBA32F texels a triangle, its object's number in the first
-corner's w) and ``shaders/objects.glsl``'s (an RGBA32UI texel an object, written each view).
+``shaders/scene.glsl``'s (three RGBA32F texels a triangle, its object's number, channel and
+sign in the corners' w) and ``shaders/objects.glsl``'s (an RGBA32UI texel an object, written each view).
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ class UploadedScene:
     revision: int
     terms: tuple  # OverlapTerms after the objects (empty unless asked for)
     ref: np.ndarray  # (3,) mm: the point all uploaded positions are relative to
-    triangles: moderngl.Texture  # 3 RGBA32F texels per triangle: corners (mm, relative to ref), object in w
+    triangles: moderngl.Texture  # 3 RGBA32F texels per triangle: corners (mm, relative to ref); in w: object, channel, sign
     objects: moderngl.Texture  # RGBA32UI per object: channel, drawn in this view, container channel + 1, label
     large: moderngl.Buffer  # indirect draw command + indices of the triangles pass 2 draws
     large_corners: moderngl.Buffer  # the six window-space corners pass 2 draws for each
@@ -40,7 +40,6 @@ class UploadedScene:
     channels: np.ndarray  # channel of each object by rank, then of each term (its first member's)
     labels: np.ndarray  # label of each object by rank
     term_rows: np.ndarray  # each term's first member's row (rank) in the object table
-    term_drawn: np.ndarray  # each term's "drawn" entry while its first member is drawn: 1, or 3 for sign −1
     num_channels: int
     num_triangles: int
     fixed_scale: float  # fixed-point units per mm of the sum accumulators
@@ -58,7 +57,11 @@ def upload_scene(gl: GLContext, scene: Scene, terms: tuple = ()) -> UploadedScen
     ref = bounds.mean(axis=0)
     materials = scene.materials
     ranked = sorted(scene.objects, key=lambda o: o.rank)
+    objects = scene.objects
     meshes = [o.mesh for o in ranked] + [t.mesh for t in terms]
+    channels = np.array([materials.index(o.material) for o in ranked]
+                        + [materials.index(objects[t.members[0]].material) for t in terms], np.uint32)
+    negative = [False] * len(ranked) + [t.sign < 0 for t in terms]
     num_triangles = sum(len(m.faces) for m in meshes)
     texels = texel_rows(3 * num_triangles, 4, np.float32)  # filled in place: no list of copies
     soup = texels[:3 * num_triangles].reshape(num_triangles, 3, 4)
@@ -66,7 +69,7 @@ def upload_scene(gl: GLContext, scene: Scene, terms: tuple = ()) -> UploadedScen
     for number, mesh in enumerate(meshes):
         part = soup[start:start + len(mesh.faces)]
         part[:, :, :3] = (mesh.vertices - ref).astype(np.float32)[mesh.faces]
-        part[:, 0, 3] = np.array(number, np.uint32).view(np.float32)
+        part[:, :, 3] = np.array([number, channels[number], negative[number]], np.uint32).view(np.float32)
         start += len(part)
     soup[:] = soup[by_size(soup[:, :, :3])]
     # Fixed point: the largest total (one bounding-box diagonal) must stay below 2^31 units.
@@ -74,7 +77,6 @@ def upload_scene(gl: GLContext, scene: Scene, terms: tuple = ()) -> UploadedScen
     fixed_scale = 2.0 ** np.floor(np.log2(2.0**30 / diagonal))
     ctx = gl.ctx
     corners = np.array([[x, y, z] for x in bounds[:, 0] for y in bounds[:, 1] for z in bounds[:, 2]]) - ref
-    objects = scene.objects
     position = {o.order: k for k, o in enumerate(ranked)}
     return UploadedScene(
         scene=scene,
@@ -86,11 +88,9 @@ def upload_scene(gl: GLContext, scene: Scene, terms: tuple = ()) -> UploadedScen
         large=ctx.buffer(reserve=4 * (4 + num_triangles)),
         large_corners=ctx.buffer(reserve=6 * 8 * num_triangles),
         ranked=ranked,
-        channels=np.array([materials.index(o.material) for o in ranked]
-                          + [materials.index(objects[t.members[0]].material) for t in terms], np.uint32),
+        channels=channels,
         labels=np.array([o.label for o in ranked], np.uint32),
         term_rows=np.array([position[t.members[0]] for t in terms], np.intp),
-        term_drawn=np.array([1 if t.sign > 0 else 3 for t in terms], np.uint32),
         num_channels=len(materials),
         num_triangles=num_triangles,
         fixed_scale=float(fixed_scale),
