@@ -36,6 +36,17 @@ c = CLContext(); print("CL chosen:", c.info, c.device.version, c.device.driver_v
     tests/gl/test_render_overlap.py tests/gl/test_render_stress.py tests/physics/test_radiograph.py \
     tests/cli/test_golden.py tests/pipeline/test_scan.py tests/gl/test_voxelize.py \
     -k "not independent_inside_test and not two_boxes"
+  # The compute passes 1/1b against every triangle rasterised (small_triangle_pixels 0), which on an
+  # H200 lost crossings at 256² and 512² (BENCHMARKS.md): 1 sends only triangles under a pixel there.
+  step compute_passes 90 python3 - <<'EOF'
+import dataclasses, numpy as np; from xrayraster.gl.pathlengths import PathLengthRenderer; from xrayraster.pipeline import load_scan_file
+l = load_scan_file("examples/twin_small.toml"); s = l.with_mount(l.sample_scene()); g = l.geometry
+for px in (128, 256, 512):
+    geo = dataclasses.replace(g, detector_shape=(px, px), pixel_size=g.pixel_size[1] * g.detector_shape[1] / px)
+    out = {k: PathLengthRenderer(geo, overlap="sum", small_triangle_pixels=k).path_lengths(s, 0) for k in (0, 1, 64)}
+    for k in (1, 64):
+        d = np.abs(out[k] - out[0]).max(0); print(f"compute passes {px}² small={k}: max {d.max():.3g} mm, {int((d > 1e-3).sum())} pixels off")
+EOF
   step one_pass 120 python3 -m scripts.bench_one_pass --json "$O/bench_one_pass.json" --plots-dir /tmp/xr
   step render 150 python3 -m scripts.bench_render --sizes 512 --levels 60 --supersampling 1 --sweep-size 512 --no-gvxr \
     --json "$O/bench_render.json" --plots-dir /tmp/xr
@@ -54,6 +65,6 @@ w = []
 for k in range(40): t0 = time.perf_counter(); f = p.frame(d, View(0.5 * k + 0.5, noise=True)); w.append(time.perf_counter() - t0)
 print(f"preview 512²: median {1e3 * st.median(w):.1f} ms a frame, max {1e3 * max(w):.1f}; last frame's stages", f.seconds)
 EOF
-  echo "=== summary"; grep -E "^GL:|CL chosen|^bench:|passed|failed|  512  1 |^ *512 |^ *1024 |ours:|seconds:|frames?/s|a frame|a view:|rc=[1-9]" "$O/gpu_log.txt"
+  echo "=== summary"; grep -E "^GL:|CL chosen|compute passes|^bench:|passed|failed|  512  1 |^ *512 |^ *1024 |ours:|seconds:|frames?/s|a frame|a view:|rc=[1-9]" "$O/gpu_log.txt"
 }
 main 2>&1 | tee "$O/gpu_log.txt"

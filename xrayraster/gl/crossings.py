@@ -240,9 +240,9 @@ class CrossingEngine:
         self._record(uploaded, view, table, {}, uniforms, lambda: acc.clear(size))
         units = self.gl.read(acc, np.int32, size // 4).reshape(uploaded.num_channels, rows * cols)
         if subtract:
-            taken = {container: sum(units[c] for k, c in subtract if k == container) for container, _ in subtract}
-            for container, total in taken.items():
-                units[container] -= total
+            raw = units.copy()  # a container channel may itself be subtracted from another
+            for container, channel in subtract:
+                units[container] -= raw[channel]
         out = units / uploaded.fixed_scale
         return out.astype(np.float32).reshape(uploaded.num_channels, rows, cols)
 

@@ -192,9 +192,10 @@ class Renderer(PathLengthRenderer):
         realism = realism or Realism()
         physics = self._physics_of(scene, spectrum, detector, output, noise, seed, realism, spectral_table)
         shots = []
-        # The GL renders view k + 1 while a thread turns view k into a radiograph (numpy and the
-        # spectral sum release the GIL): a view costs the larger of the two, not their sum, where
-        # they run on different hardware (a GPU), and the GL's idle moments are filled on a CPU.
+        # The GL renders view k + 1 while a thread turns view k into a radiograph (numpy, the spectral
+        # sum and a view's GL calls release the GIL): a view costs the larger of the two, not their
+        # sum, where they run on different hardware (a GPU), and the GL's idle moments are filled on
+        # a CPU (on these 2 cores, both saturated, a draw: 40-44 ms a twin view either way).
         # Each view's physics depends on its path lengths and index alone: the same bytes as in turn.
         with ThreadPoolExecutor(1, thread_name_prefix="xrayraster-physics") as cpu:
             pending = None
