@@ -75,7 +75,7 @@ class LabelVolume:
         fractions = [fractions_path(Path(path)).name] if self.fractions is not None else []
         out, *side = checked_outputs(path, quicklook=quicklook, beside=fractions)
         png = side[0] if quicklook else None
-        present = sorted(int(k) for k in np.unique(self.data) if k)
+        present = [int(k) for k in np.flatnonzero(np.bincount(self.data.ravel())) if k]
         write_volume(out, self.data, self.geometry, {
             "quantity": "label (0: background; else the label of the highest-priority object at the voxel centre)",
             "labels_present": present, **self.provenance})

@@ -45,15 +45,18 @@ def filter_rows_host(lineint: np.ndarray, vectors: np.ndarray, toward_axis: np.n
     for first in range(0, views, step):
         part = slice(first, min(first + step, views))
         q = lineint[part] * pre_weights(vectors[part], toward_axis[part], redundancy[part], rows, cols, cone)
-        padded = np.zeros((len(q), rows, n), np.float32)
-        padded[..., lead : lead + cols] = q
+        if lead or pad:
+            padded = np.zeros((len(q), rows, n), np.float32)
+            padded[..., lead : lead + cols] = q
+        else:  # the rows first, zeros after them: the FFT pads them itself (a tenth of the filtering saved)
+            padded = q
         if pad:
             widths = np.full((views, 2), pad) if widths is None else widths
             extension = row_extensions(q, ends[part], vectors[part], toward_axis[part], cone, pad, widths[part])
             j = np.arange(1, pad + 1)
             padded[..., (lead - j) % n] = extension[:, :, 0]
             padded[..., (lead + cols - 1 + j) % n] = extension[:, :, 1]
-        spectrum = scipy.fft.rfft(padded, axis=-1, workers=workers)
+        spectrum = scipy.fft.rfft(padded, n=n, axis=-1, workers=workers)
         spectrum *= half
         filtered = scipy.fft.irfft(spectrum, n=n, axis=-1, workers=workers)[..., :out_cols]
         if column_major:
