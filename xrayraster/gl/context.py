@@ -114,7 +114,8 @@ class GLContext:
 
     def function(self, name: str, restype, argtypes):
         """A raw GL entry point as a ctypes function, for what moderngl does not wrap (stencil
-        operations), or None when the driver lacks it. Call it inside :meth:`current`."""
+        operations) or calls holding Python's GIL (:meth:`dispatch` and the rest), or None when the
+        driver lacks it. Call it inside :meth:`current`. Through ctypes a call releases the GIL."""
         if self.backend == "osmesa":
             pointer = self._osmesa.load_opengl_function(name)
         else:
@@ -122,6 +123,14 @@ class GLContext:
             egl.eglGetProcAddress.restype = ctypes.c_void_p
             egl.eglGetProcAddress.argtypes = [ctypes.c_char_p]
             pointer = egl.eglGetProcAddress(name.encode())
+            # EGL before 1.5 need not resolve core functions: then the GL library's own symbol, as
+            # moderngl's loader falls back to it.
+            for library in () if pointer else ("libOpenGL.so.0", "libGL.so.1"):
+                try:
+                    pointer = ctypes.cast(getattr(ctypes.CDLL(library), name), ctypes.c_void_p).value
+                except (OSError, AttributeError):
+                    continue
+                break
         return ctypes.CFUNCTYPE(restype, *argtypes)(pointer) if pointer else None
 
     def dispatch(self, prog: moderngl.ComputeShader, x: int, y: int = 1, z: int = 1) -> None:
