@@ -22,7 +22,9 @@ main() {
   ldd /usr/lib/x86_64-linux-gnu/libGL.so.1 | grep -q "not found" && export GLCONTEXT_LINUX_LIBGL=libOpenGL.so.0
   if ! ls /etc/OpenCL/vendors/*.icd &>/dev/null; then
     lib=$(ldconfig -p | awk '/libnvidia-opencl\.so\.1/{print $NF; exit}')
-    [ -n "$lib" ] || lib=$(find /usr/local/nvidia /usr/lib /lib -name libnvidia-opencl.so.1 2>/dev/null | head -1)
+    [ -n "$lib" ] || lib=$(find /usr/local/nvidia /usr/lib /usr/lib64 /lib /usr/local/cuda* /opt -name 'libnvidia-opencl.so*' 2>/dev/null | head -1)
+    # The H200's run found none in those: the driver's libraries may be mounted anywhere.
+    [ -n "$lib" ] || lib=$(timeout 30 find / \( -path /proc -o -path /sys \) -prune -o -name 'libnvidia-opencl.so*' -print 2>/dev/null | head -1)
     echo "ICD: ${lib:-NONE}"; [ -n "$lib" ] && mkdir -p /tmp/ocl && echo "$lib" >/tmp/ocl/nvidia.icd && export OCL_ICD_VENDORS=/tmp/ocl
   fi
   nvidia-smi --query-gpu=name,driver_version --format=csv,noheader; free -g | head -2
