@@ -23,6 +23,7 @@ import warnings
 
 from .. import __version__
 from ..core.errors import XrayrasterError, XrayrasterWarning  # standard library only
+from ..core.heap import keep_freed_memory  # standard library only
 from . import interrupts
 
 EXIT_OK, EXIT_UNEXPECTED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
@@ -43,6 +44,7 @@ def main(argv=None) -> int:
             return EXIT_OK
         with interrupts.deferred():  # a library interrupted mid-import may swallow it, or crash
             from . import build, compare, info, preview, reconstruct, render, scan, voxelize, weave
+        keep_freed_memory()  # the command owns the process (core/heap.py)
         parser = argparse.ArgumentParser(prog="xrayraster", description="X-ray CT simulation from triangle meshes.")
         parser.add_argument("--version", action="version", version=f"xrayraster {__version__}")
         subparsers = parser.add_subparsers(dest="command", required=True)

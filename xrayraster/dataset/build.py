@@ -405,16 +405,19 @@ def _init_worker() -> None:
 
 
 def _worker_contexts(threads: int | None):
-    """This process's GL and OpenCL contexts, made on its first sample. A worker sharing the machine
+    """This process's GL and OpenCL contexts, made on its first sample, its heap set to keep freed
+    arrays (:func:`~xrayraster.core.heap.keep_freed_memory`). A worker sharing the machine
     (``threads``: its share of the cores) first caps the CPU threads llvmpipe and PoCL start, which
     they read once, when the first context is made; a variable the user set is left as it is."""
     global _contexts
     if _contexts is None:
+        from ..core.heap import keep_freed_memory
         from ..gl.context import GLContext
         from ..recon.opencl import CLContext
 
         if threads is not None:
             os.environ.setdefault("LP_NUM_THREADS", str(threads))  # llvmpipe's rasteriser threads
             os.environ.setdefault("POCL_MAX_PTHREAD_COUNT", str(threads))  # PoCL's CPU device
+        keep_freed_memory()  # a worker's process is the build's (core/heap.py)
         _contexts = (GLContext(), CLContext())
     return _contexts
