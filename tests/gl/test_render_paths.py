@@ -152,9 +152,13 @@ def test_the_split_defaults_to_the_compute_passes_on_cpu_rasterisers_only(gl):
     driver: on an NVIDIA H200 the compute passes lost crossings at 256² and 512²."""
     from types import SimpleNamespace
 
+    from xrayraster.gl.context import GLContext
     from xrayraster.gl.crossings import SMALL_TRIANGLE_PIXELS, default_small_triangle_pixels
 
-    named = lambda renderer: SimpleNamespace(ctx=SimpleNamespace(info={"GL_RENDERER": renderer}))  # noqa: E731
+    def named(renderer):  # a context whose driver gives this GL_RENDERER
+        info = SimpleNamespace(ctx=SimpleNamespace(info={"GL_RENDERER": renderer}))
+        return SimpleNamespace(software=GLContext.software.fget(info))
+
     assert default_small_triangle_pixels(named("llvmpipe (LLVM 15.0.6, 256 bits)")) == SMALL_TRIANGLE_PIXELS
     assert default_small_triangle_pixels(named("NVIDIA H200/PCIe/SSE2")) == 0
     with xr.Renderer(xr.ConeBeamGeometry(100.0, 200.0, (16, 16), 0.5, [0.0]), context=gl) as r:

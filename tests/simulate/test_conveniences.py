@@ -5,6 +5,8 @@ their scale, and the GL context's thread check."""
 from __future__ import annotations
 
 import json
+import os
+import sys
 import threading
 
 import numpy as np
@@ -15,6 +17,7 @@ from PIL import Image
 
 import xrayraster as xr
 from xrayraster.core.tiff import QUICKLOOK_MIN_PX, quicklook_factor, write_quicklook
+from xrayraster.simulate.renderer import PHYSICS_NICENESS
 
 GEOMETRY = xr.ConeBeamGeometry(100.0, 200.0, (24, 30), 0.8, xr.full_circle(5))
 MONO = xr.Spectrum.monochromatic(60.0, 1e6)
@@ -76,14 +79,21 @@ def test_project_all_defaults_to_every_view_and_equals_project(renderer, scene):
 def test_project_all_overlaps_the_physics_and_keeps_every_byte(renderer, scene, monkeypatch):
     """The physics of view k runs on a thread while the GL renders view k + 1: with the scan's
     shared patterns (flats, gain map, a focal spot) and views out of order, every view is still
-    the bytes project() gives alone, and the physics did run off the main thread."""
+    the bytes project() gives alone, and the physics did run off the main thread; beside a GL on
+    the CPU (llvmpipe), at the lowest priority as the kernel reports it, the caller's unchanged."""
     realism = xr.Realism(focal_spot_mm=0.3, flat_fields=4, gain_variation=0.01)
     threads = set()
     physics_of = renderer._physics_of
+    niceness = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
 
     def watched(*args):
         run = physics_of(*args)
-        return lambda view, lengths: threads.add(threading.current_thread().name) or run(view, lengths)
+
+        def physics(view, lengths):
+            threads.add((threading.current_thread().name, os.getpriority(os.PRIO_PROCESS, threading.get_native_id())))
+            return run(view, lengths)
+
+        return physics
 
     monkeypatch.setattr(renderer, "_physics_of", watched)
     views = [3, 0, 4, 1]
@@ -91,7 +101,10 @@ def test_project_all_overlaps_the_physics_and_keeps_every_byte(renderer, scene, 
     for k, v in enumerate(views):
         np.testing.assert_array_equal(p.data[k], renderer.project(scene, MONO, v, noise=True, seed=11,
                                                                   realism=realism).image)
-    assert any(name.startswith("xrayraster-physics") for name in threads)
+    assert any(name.startswith("xrayraster-physics") for name, _ in threads)
+    if renderer.gl.software and sys.platform.startswith("linux"):
+        assert {nice for name, nice in threads if name.startswith("xrayraster-physics")} == {PHYSICS_NICENESS}
+    assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) == niceness
 
 
 @pytest.mark.parametrize("mode, unit", [("integrating", "keV deposited"), ("counting", "counts")])

@@ -25,6 +25,7 @@ from ..core.shader_files import read_shader
 from .bindings import binding_defines
 
 REQUIRED_GL = 430  # SSBOs, compute shaders, indirect draws
+SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast")  # GL_RENDERER names of Mesa's CPU rasterisers
 
 INSTALL_HINT = (
     "xrayraster needs OpenGL 4.3 through EGL or OSMesa. On Debian/Ubuntu install the drivers with "
@@ -102,6 +103,13 @@ class GLContext:
         """Driver name, e.g. 'llvmpipe (LLVM 15.0.6, 256 bits)'."""
         with self.current():
             return self.ctx.info["GL_RENDERER"]
+
+    @property
+    def software(self) -> bool:
+        """Whether the GL renders on the CPU (one of Mesa's :data:`SOFTWARE_RENDERERS`): its work
+        then shares the cores with the rest of the process."""
+        renderer = str(self.ctx.info.get("GL_RENDERER", "")).lower()
+        return any(name in renderer for name in SOFTWARE_RENDERERS)
 
     def program(self, vertex: str, fragment: str, defines: dict | None = None) -> moderngl.Program:
         key = (vertex, fragment, tuple(sorted((defines or {}).items())))

@@ -53,7 +53,6 @@ NODE_STRIPE_BITS = 8  # the node pool's 256 stripes, each with its own counter (
 CANDIDATES_HEADER = 16  # bytes before the candidate entries: their count, pass 1b's work groups
 ENTRY_BYTES = 16  # a candidate entry: a triangle and up to two of its pixels (shaders/candidates.glsl)
 SMALL_TRIANGLE_PIXELS = 64  # measured: 32-128 equally fast on llvmpipe at 256²-2048²
-SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast")  # GL_RENDERER names of Mesa's CPU rasterisers
 
 
 def default_small_triangle_pixels(gl: GLContext) -> int:
@@ -62,8 +61,7 @@ def default_small_triangle_pixels(gl: GLContext) -> int:
     On an NVIDIA H200 (driver 580.159.04, 2026-11-27) the compute passes 1 and 1b lost or misplaced
     crossings at 256² and 512² (81 k of 262 k pixels of twin_small off by up to 36 mm, against
     2e-4 mm rasterised), a bug not yet found; the rasteriser is the GPU's fast path anyway."""
-    renderer = str(gl.ctx.info.get("GL_RENDERER", "")).lower()
-    return SMALL_TRIANGLE_PIXELS if any(name in renderer for name in SOFTWARE_RENDERERS) else 0
+    return SMALL_TRIANGLE_PIXELS if gl.software else 0
 
 
 class CrossingEngine:
