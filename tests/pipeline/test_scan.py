@@ -316,3 +316,30 @@ def test_saved_projections_are_the_ones_reconstructed(gl, cl, tmp_path):
     again = xr.fdk(projections, volume=load_scan_file(EXAMPLE).volume)
     volume = read_tiff(out / "volume.tif")[0]
     assert np.allclose(again.data, volume, rtol=0, atol=1e-5 * np.abs(volume).max())
+
+
+FAMILY_CELLS = {  # the thick cell's box (5 x 5 x 4 mm), in each family's own form
+    "orthogonal": 'family = "orthogonal"\nweft_per_layer = 2\nweft_layers = 2\nwarp_positions = 1\n'
+                  "margin_z = 0.92\n",
+    "through_thickness_angle_interlock": 'family = "through_thickness_angle_interlock"\nweft_layers = 2\n'
+                                         "weft_spacing = 1.25\nwarp_positions = 2\nmargin_z = 0.92\n",
+    "offset_angle_interlock": 'family = "offset_angle_interlock"\nweft_layers = 2\nweft_spacing = 1.25\n'
+                              "warp_positions = 2\nmargin_z = 0.92\n",
+}
+
+
+@pytest.mark.parametrize("family", sorted(FAMILY_CELLS))
+def test_every_family_scans_with_its_classes_ordered_as_they_attenuate(gl, cl, tmp_path, family):
+    """The thick scan with the cell of another family: its reconstruction's class means, two voxels
+    inside each class, read warp (carbon, 1.82 g/cm³) > weft (carbon, 1.72) > matrix (epoxy, 1.08)."""
+    path = tmp_path / f"{family}.toml"
+    path.write_text(thick_text().replace(THICK_CELL, "\n[weave]\n" + FAMILY_CELLS[family], 1))
+    result = xr.scan(load_scan_file(path), gl=gl, cl=cl)
+    volume, labels = result.volume.data, result.labels.data
+    assert result.metadata["sample"]["cell"]["family"] == family
+    means = {}
+    for label in (MATRIX, WEFT, WARP):
+        core = ndimage.binary_erosion(labels == label, iterations=2)
+        assert core.sum() > 50, label
+        means[label] = float(volume[core].mean())
+    assert means[WARP] > means[WEFT] > means[MATRIX], means

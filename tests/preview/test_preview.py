@@ -684,3 +684,23 @@ def test_the_slice_button_shows_the_quick_slice_and_its_labels(browser, previewe
     np.testing.assert_array_equal(np.array(cut["labels"]).reshape(expected.labels.shape), expected.labels)
     assert cut["header"]["views"] == 90 and "90 views" in caption and "1/cm" in caption
     assert legend.split() == ["1", "matrix", "2", "weft", "3", "warp"]
+
+
+@pytest.mark.parametrize("family, shown, hidden", [
+    ("layer_to_layer", set(), {"weave.binder_step", "weave.binder_offset", "weave.warp_ratio"}),
+    ("orthogonal", {"weave.warp_ratio", "weave.binder_ratio"}, {"weave.binder_step", "weave.binder_offset"}),
+    ("offset_angle_interlock", {"weave.binder_step", "weave.binder_offset"}, {"weave.warp_ratio"}),
+])
+def test_a_weave_shows_the_sliders_of_its_family(tmp_path, family, shown, hidden):
+    """Each family's own fields get sliders at the cell's values; another family's fields, and the
+    stuffer ratio of a cell without stuffers, get none."""
+    from xrayraster.preview.controls import controls
+    from xrayraster.preview.document import Document
+
+    path = tmp_path / "weave.toml"
+    path.write_text(f'[weave]\nfamily = "{family}"\n')
+    document = Document.open(path)
+    loaded = document.load()
+    got = {c["key"]: c["value"] for c in controls(document, loaded)}
+    assert shown <= set(got) and not hidden & set(got)
+    assert all(got[key] == getattr(loaded.weave.sample.cell, key.split(".")[-1]) for key in shown)

@@ -118,7 +118,7 @@ def test_dict_round_trip_is_exact_and_toml_ready():
         assert set(d) == {"weft_per_layer", "weft_layers", "warp_positions", "binders", "binder_position",
                           "binder_path", "stuffers", "warp_spacing", "weft_spacing", "warp_width_fraction",
                           "weft_width_fraction", "weft_share", "thickness", "weft_section", "warp_section",
-                          "margin_xy", "margin_z"}
+                          "margin_xy", "margin_z", "family", "warp_ratio", "binder_ratio"}
     table = tomllib.loads('weft_layers = 3\nmargin_z = 0.7\nbinder_path = [[2, 2, 0, 0], [3, 3, 1, 1]]\nbinders = 2\n'
                           'weft_section = { shape = "power_ellipse", exponent = 0.8 }\n')
     c = UnitCell.from_dict(table)

@@ -25,6 +25,10 @@ _WEAVE = (
     ("weave.thickness", "thickness", "mm", "number", 0.5, 20.0, 0.05),
     ("weave.weft_per_layer", "wefts per layer", "", "integer", 1, 16, 1),
     ("weave.weft_layers", "weft layers", "", "integer", 2, 12, 1),
+    ("weave.warp_ratio", "stuffer columns a group", "", "integer", 1, 8, 1),
+    ("weave.binder_ratio", "binder positions a group", "", "integer", 1, 8, 1),
+    ("weave.binder_step", "columns a binder gap", "", "integer", 1, 8, 1),
+    ("weave.binder_offset", "binder offset", "columns", "integer", 0, 16, 1),
 )
 
 
@@ -49,6 +53,8 @@ def controls(document: Document, loaded) -> list[dict]:
         for key, label, unit, kind, lo, hi, step in _WEAVE:
             name = key.split(".")[-1]
             value = sample.seed if name == "seed" else getattr(sample.cell, name)
+            if value is None or (name == "warp_ratio" and not sample.cell.stuffers):
+                continue  # a field of another family, or a ratio of stuffers the cell has not
             out.append(_control(key, label, unit, kind, lo, hi, step, value))
     return out
 

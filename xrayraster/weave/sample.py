@@ -191,13 +191,25 @@ class Sample:
                 section_outline(c.warp_section, c.warp_width, c.warp_height, k))
 
     def _binder_nodes(self, x: float, path, columns: np.ndarray, z0: float) -> np.ndarray:
-        """A binder's plateau nodes (see PLATEAU) at ``x`` over weft ``columns`` (counted over all cells)."""
+        """A binder's plateau nodes (see PLATEAU) at ``x`` over weft ``columns`` (counted over all cells).
+
+        An angle-interlock binder climbing or falling through a column (its gaps before and after it
+        one below and one above, or the reverse) runs straight there instead: its nodes lie on the
+        line between its neighbouring columns' gap heights, so its slopes are straight lines between
+        its turns, as the family defines them (docs/weave.md)."""
         c = self.cell
+        w = c.weft_per_layer
         offsets = np.asarray(PLATEAU) * (c.weft_width / 2)
         ys = ((columns + 0.5) * c.weft_spacing)[:, None] + offsets[None, :]
-        ys = ys.ravel()
-        zs = np.repeat([c.gap_z(path[j % c.weft_per_layer]) for j in columns], len(offsets)) + z0
-        return np.column_stack([np.full(len(ys), x), ys, zs])
+        heights = np.array([c.gap_z(path[j % w]) for j in columns])
+        zs = np.repeat(heights[:, None], len(offsets), axis=1)
+        if c.family.endswith("angle_interlock"):
+            for k, j in enumerate(columns):
+                before, here, after = (path[(j + d) % w] for d in (-1, 0, 1))
+                if (before - here) * (here - after) > 0 and abs(before - after) == 2:
+                    slope = (c.gap_z(after) - c.gap_z(before)) / (2 * c.weft_spacing)
+                    zs[k] = heights[k] + slope * offsets
+        return np.column_stack([np.full(ys.size, x), ys.ravel(), zs.ravel() + z0])
 
     def _regular_yarns(self) -> list[Yarn]:
         c = self.cell

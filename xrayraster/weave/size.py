@@ -22,6 +22,7 @@ import dataclasses
 from dataclasses import dataclass
 
 from ..core.estimate import Estimate, Part
+from .families import FAMILIES
 from .spec import UnitCell
 
 #: Triangles per (points of a section × samples per mm × mm of yarn): measured 0.38–0.62 on the
@@ -49,6 +50,8 @@ SECONDS_PER_BEND_POINT = 2.5e-6
 #: The keys a sample's size grows with, by the table that holds them.
 CELL_KEYS = ("weft_per_layer", "weft_layers", "warp_positions", "binders", "stuffers", "weft_spacing", "warp_spacing")
 SAMPLE_KEYS = ("cells", "layers_of_cells", "points_per_section", "samples_per_mm")
+#: The keys that lay the cell's warp columns out and set its defaults (not multipliers themselves).
+LAYOUT_KEYS = ("family", "warp_ratio", "binder_ratio")
 #: :class:`~xrayraster.weave.Sample`'s defaults of :data:`SAMPLE_KEYS`, kept here (Sample takes them
 #: from here) so a size is planned without importing the module that meshes.
 SAMPLE_DEFAULTS = {"cells": (1, 1), "layers_of_cells": 1, "points_per_section": 24, "samples_per_mm": 4.0}
@@ -70,8 +73,9 @@ _COARSER = "a coarser mesh (points_per_section, samples_per_mm)"
 @dataclass(frozen=True)
 class Size:
     """The keys of a ``[weave]`` table (:data:`CELL_KEYS`) and of its ``[weave.sample]``
-    (:data:`SAMPLE_KEYS`) that a woven sample's triangles grow with; ``binders`` None: generated,
-    ``warp_positions × (weft_layers − 1)``, as :class:`~xrayraster.weave.UnitCell` makes them."""
+    (:data:`SAMPLE_KEYS`) that a woven sample's triangles grow with, and the layout of its warp
+    columns (:data:`LAYOUT_KEYS`); ``binders`` None: generated, as the family makes them
+    (:class:`~xrayraster.weave.UnitCell`)."""
 
     weft_per_layer: int
     weft_layers: int
@@ -84,6 +88,9 @@ class Size:
     layers_of_cells: int
     points_per_section: int
     samples_per_mm: float
+    family: str = "layer_to_layer"
+    warp_ratio: int = 1
+    binder_ratio: int = 1
 
     @classmethod
     def of(cls, sample) -> "Size":
@@ -91,31 +98,42 @@ class Size:
         if isinstance(sample, Size):
             return sample
         cell = sample.cell
-        return cls(**{k: getattr(cell, k) for k in CELL_KEYS}, **{k: getattr(sample, k) for k in SAMPLE_KEYS})
+        return cls(**{k: getattr(cell, k) for k in (*CELL_KEYS, *LAYOUT_KEYS)},
+                   **{k: getattr(sample, k) for k in SAMPLE_KEYS})
 
     @classmethod
     def planned(cls, cell: dict, sample: dict) -> "Size":
         """The size of the sample that ``UnitCell(**cell)`` and ``Sample(cell, **sample)`` would make,
-        without making them: keys left out take those classes' defaults (other keys are ignored)."""
+        without making them: keys left out take those classes' defaults, the family's where it has
+        its own (other keys are ignored)."""
         defaults = {**{f.name: f.default for f in dataclasses.fields(UnitCell)}, **SAMPLE_DEFAULTS}
-        given = {**cell, **sample}
-        return cls(**{k: given.get(k, defaults[k]) for k in (*CELL_KEYS, *SAMPLE_KEYS)})
+        given = {k: v for k, v in {**defaults, **cell, **sample}.items() if v is not None}
+        family, n = FAMILIES[given["family"]], given["weft_layers"]
+        given.setdefault("weft_per_layer", family.default_weft_per_layer(n, given.get("binder_step") or 1))
+        given.setdefault("stuffers", family.default_stuffers(n))
+        return cls(**{k: given.get(k) for k in (*CELL_KEYS, *SAMPLE_KEYS, *LAYOUT_KEYS)})
 
     @property
     def binder_count(self) -> int:
-        return self.warp_positions * (self.weft_layers - 1) if self.binders is None else self.binders
+        return FAMILIES[self.family].binder_count(self.warp_positions, self.weft_layers) if self.binders is None \
+            else self.binders
+
+    @property
+    def stuffer_columns(self) -> int:
+        """``warp_ratio`` after each group of ``binder_ratio`` binder positions, where there are stuffers."""
+        return self.warp_positions // self.binder_ratio * self.warp_ratio if self.stuffers else 0
 
     @property
     def yarns_per_cell(self) -> int:
         """Wefts (a row of ``weft_per_layer`` in each weft layer) and warps (binders and stuffers)."""
-        return self.weft_layers * self.weft_per_layer + self.binder_count + self.warp_positions * self.stuffers
+        return self.weft_layers * self.weft_per_layer + self.binder_count + self.stuffer_columns * self.stuffers
 
     def yarn_length_mm(self) -> float:
         """The yarns' summed length (mm) along their runs: wefts along x, warps along y."""
-        columns = self.warp_positions * (2 if self.stuffers else 1)  # stuffer columns between binders
+        columns = self.warp_positions + self.stuffer_columns
         cell_x, cell_y = columns * self.warp_spacing, self.weft_per_layer * self.weft_spacing
         wefts = self.weft_layers * self.weft_per_layer
-        warps = self.binder_count + self.warp_positions * self.stuffers
+        warps = self.binder_count + self.stuffer_columns * self.stuffers
         nx, ny = self.cells
         return self.layers_of_cells * nx * ny * (wefts * cell_x + warps * cell_y)
 

@@ -1,4 +1,4 @@
-"""The unit cell of a layer-to-layer angle-interlock weave: what a user measures on the loom.
+"""The unit cell of a 3D weave (layer-to-layer angle interlock by default): what a user measures on the loom.
 
 Frame (mm): weft yarns run along x and are spaced along y; warp yarns (binders, and optional
 straight stuffers) run along y and are spaced along x; z is the thickness, weft layer 0 at the
@@ -6,9 +6,10 @@ bottom. The cell spans ``[0, size[0]] × [0, size[1]] × [0, size[2]]`` and tile
 
 A binder's path is its *gap* at each weft column: gap ``g`` is the space between weft layers
 ``g − 1`` and ``g``, so gap 0 lies below the bottom weft layer and gap ``weft_layers`` above the
-top one. Weft column ``j`` sits at ``y = (j + 0.5) · weft_spacing``. Every field, its unit and its
-default are documented in docs/weave.md; the dict form (:meth:`UnitCell.to_dict`) uses the same
-names as the ``[weave]`` table of a TOML file.
+top one. Weft column ``j`` sits at ``y = (j + 0.5) · weft_spacing``. The ``family`` sets how the
+binders run (:mod:`~xrayraster.weave.families`). Every field, its unit and its default are
+documented in docs/weave.md; the dict form (:meth:`UnitCell.to_dict`) uses the same names as the
+``[weave]`` table of a TOML file.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from ..core import fields
 from ..core.choices import check_choice
 from ..core.errors import ConfigError, WeaveError
 from ..core.validate import show
+from .families import FAMILIES, FAMILY_FIELDS, FAMILY_NAMES
 
 __all__ = ["SECTION_SHAPES", "Section", "UnitCell"]
 
@@ -110,23 +112,30 @@ class Section:
 
 @dataclass(frozen=True)
 class UnitCell:
-    """One repeat of a layer-to-layer angle-interlock weave; lengths in mm (docs/weave.md).
+    """One repeat of a 3D weave of the ``family`` (:mod:`~xrayraster.weave.families`); lengths in mm
+    (docs/weave.md).
 
-    ``binders``, ``binder_position`` and ``binder_path`` left as None are generated: one binder per
-    adjacent weft-layer pair in every warp position (``warp_positions · (weft_layers − 1)`` binders),
-    binder ``b`` in position ``b % warp_positions`` linking weft layers ``k`` and ``k + 1`` with
+    Fields left as None take the family's values. Layer to layer (the default), ``binders``,
+    ``binder_position`` and ``binder_path`` are generated: one binder per adjacent weft-layer pair
+    in every warp position (``warp_positions · (weft_layers − 1)`` binders), binder ``b`` in position
+    ``b % warp_positions`` linking weft layers ``k`` and ``k + 1`` with
     ``k = (b // warp_positions) % (weft_layers − 1)``: over layer ``k + 1`` (gap ``k + 2``) for the
     first half of the columns, under layer ``k`` (gap ``k``) for the second, the binders of one
     position in phase and each position shifted by ``weft_per_layer / warp_positions`` columns.
+    ``weft_per_layer`` is 4 but for the angle interlocks (one period of their binders), ``stuffers``
+    0 but for the orthogonal weave (``weft_layers − 1``), ``margin_z`` 0.4 mm layer to layer and
+    the binders' height in the other families. The warp columns across the cell are groups
+    of ``binder_ratio`` binder positions followed, where there are stuffers, by ``warp_ratio``
+    stuffer columns; ``binder_step`` and ``binder_offset`` belong to the angle interlocks.
     """
 
-    weft_per_layer: int = 4
+    weft_per_layer: int | None = None
     weft_layers: int = 5
     warp_positions: int = 4
     binders: int | None = None
     binder_position: tuple[int, ...] | None = None
     binder_path: tuple[tuple[int, ...], ...] | None = None
-    stuffers: int = 0
+    stuffers: int | None = None
     warp_spacing: float = 2.5
     weft_spacing: float = 2.5
     warp_width_fraction: float = 0.8
@@ -136,12 +145,48 @@ class UnitCell:
     weft_section: Section = Section("power_ellipse", exponent=3.0)
     warp_section: Section = Section("lenticular")
     margin_xy: float = 0.0
-    margin_z: float = 0.4
+    margin_z: float | None = None
+    family: str = "layer_to_layer"
+    warp_ratio: int = 1
+    binder_ratio: int = 1
+    binder_step: int | None = None
+    binder_offset: int | None = None
 
     def __post_init__(self):
-        n = _int("weft_layers", self.weft_layers, 2, " (a layer-to-layer weave links at least two weft layers)")
-        w = _int("weft_per_layer", self.weft_per_layer, 1, " (weft yarns per layer in the cell)")
+        check_choice(self.family, FAMILY_NAMES, "family", WeaveError)
+        family = FAMILIES[self.family]
+        for name in FAMILY_FIELDS:
+            if name not in family.takes and getattr(self, name) is not None:
+                takers = [f for f, rule in FAMILIES.items() if name in rule.takes]
+                raise WeaveError(f"{name}: family {self.family!r} takes no {name} (it belongs to "
+                                 f"{' and '.join(map(repr, takers))}); remove it or change family")
+        n = _int("weft_layers", self.weft_layers, 2, " (a 3D weave holds at least two weft layers)")
+        step = offset = None
+        if "binder_step" in family.takes:
+            step = _int("binder_step", 1 if self.binder_step is None else self.binder_step, 1,
+                        " (weft columns a binder takes to climb one gap)")
+            _set(self, "binder_step", step)
+        if "binder_offset" in family.takes:
+            offset = _int("binder_offset", 1 if self.binder_offset is None else self.binder_offset, 0,
+                          " (weft columns between the paths of neighbouring binder positions)")
+            _set(self, "binder_offset", offset)
+        w = self.weft_per_layer
+        w = family.default_weft_per_layer(n, step or 1) if w is None else w
+        w = _int("weft_per_layer", w, 1, " (weft yarns per layer in the cell)")
+        _set(self, "weft_per_layer", w)
+        period = family.period(n, step or 1)
+        if period and w % period:
+            raise WeaveError(f"weft_per_layer ({w}) must be a multiple of the binders' period, 2 · weft_layers · "
+                             f"binder_step = {period} columns, so the cell repeats; use {period} or "
+                             f"{2 * period}")
         p = _int("warp_positions", self.warp_positions, 1, " (warp positions across the cell)")
+        _set(self, "warp_ratio", _int("warp_ratio", self.warp_ratio, 1, " (stuffer columns after each group "
+                                                                        "of binder positions)"))
+        br = _int("binder_ratio", self.binder_ratio, 1, " (binder positions in each group)")
+        _set(self, "binder_ratio", br)
+        if p % br:
+            raise WeaveError(f"warp_positions ({p}) must be a multiple of binder_ratio ({br}): the warp columns "
+                             "repeat in groups of binder_ratio binder positions")
         for name in ("warp_spacing", "weft_spacing", "thickness"):
             _set(self, name, _number(name, getattr(self, name), lo=0.0, fix=" mm"))
         for name in ("warp_width_fraction", "weft_width_fraction"):
@@ -150,9 +195,13 @@ class UnitCell:
                                          "lower the fraction or widen the spacing)"))
         _set(self, "weft_share", _number("weft_share", self.weft_share, lo=0.0, hi=1.0, hi_open=True,
                                          fix=" (the weft's share of the yarn stack thickness)"))
+        if self.margin_z is None:
+            _set(self, "margin_z", family.default_margin_z(self.thickness, self.weft_share, n))
         for name in ("margin_xy", "margin_z"):
             _set(self, name, _number(name, getattr(self, name), lo=0.0, lo_open=False, fix=" mm"))
-        stuffers = _int("stuffers", self.stuffers, 0)
+        stuffers = family.default_stuffers(n) if self.stuffers is None else self.stuffers
+        stuffers = _int("stuffers", stuffers, 0)
+        _set(self, "stuffers", stuffers)
         if stuffers > n - 1:
             raise WeaveError(f"stuffers must be <= weft_layers - 1 = {n - 1} (one per gap between weft layers), "
                              f"got {stuffers}")
@@ -170,10 +219,10 @@ class UnitCell:
                              "raise thickness or lower margin_z")
 
         b = self.binders
-        b = p * (n - 1) if b is None else _int("binders", b, 1, " (binder warp yarns per cell)")
+        b = family.binder_count(p, n) if b is None else _int("binders", b, 1, " (binder warp yarns per cell)")
         _set(self, "binders", b)
         _set(self, "binder_position", self._positions(b, p))
-        _set(self, "binder_path", self._paths(b, n, w, p))
+        _set(self, "binder_path", self._paths(b, n, w, p, step or 1, offset or 0))
         self._check_room(n)
 
     def _positions(self, b: int, p: int) -> tuple[int, ...]:
@@ -191,9 +240,10 @@ class UnitCell:
             out.append(x)
         return tuple(out)
 
-    def _paths(self, b: int, n: int, w: int, p: int) -> tuple[tuple[int, ...], ...]:
+    def _paths(self, b: int, n: int, w: int, p: int, step: int, offset: int) -> tuple[tuple[int, ...], ...]:
+        family = FAMILIES[self.family]
         if self.binder_path is None:
-            return tuple(self._default_path(i, n, w, p) for i in range(b))
+            return tuple(family.path(i, n, w, p, step, offset) for i in range(b))
         paths = self.binder_path
         if isinstance(paths, (str, bytes)) or not hasattr(paths, "__len__") or len(paths) != b:
             raise WeaveError(f"binder_path must hold one path per binder ({b}), got "
@@ -211,15 +261,9 @@ class UnitCell:
                     raise WeaveError(f"binder_path[{i}][{j}] = {g} leaves the weft stack: gaps run 0 (below weft "
                                      f"layer 0) to {n} (above the top layer, weft_layers = {n})")
                 gaps.append(g)
+            family.check_path(i, tuple(gaps), n)
             out.append(tuple(gaps))
         return tuple(out)
-
-    @staticmethod
-    def _default_path(i: int, n: int, w: int, p: int) -> tuple[int, ...]:
-        k = (i // p) % (n - 1)           # links weft layers k and k + 1
-        shift = (i % p) * w // p         # positions staggered along the warp
-        half = (w + 1) // 2
-        return tuple(k + 2 if (j - shift) % w < half else k for j in range(w))
 
     def _check_room(self, n: int) -> None:
         """Binders of one position never share a gap in one column; surface loops fit in margin_z."""
@@ -241,9 +285,15 @@ class UnitCell:
     # Derived values (mm) for the mesher.
 
     @property
+    def warp_groups(self) -> int:
+        """Groups of ``binder_ratio`` binder positions across the cell."""
+        return self.warp_positions // self.binder_ratio
+
+    @property
     def warp_columns(self) -> int:
-        """Warp columns across x: binder positions, and stuffer columns between them when stuffers > 0."""
-        return self.warp_positions * (2 if self.stuffers else 1)
+        """Warp columns across x: binder positions, and ``warp_ratio`` stuffer columns after each group
+        of them when stuffers > 0."""
+        return self.warp_positions + (self.warp_groups * self.warp_ratio if self.stuffers else 0)
 
     @property
     def size(self) -> tuple[float, float, float]:
@@ -291,17 +341,24 @@ class UnitCell:
         return tuple((j + 0.5) * self.weft_spacing for j in range(self.weft_per_layer))
 
     @property
+    def _group_columns(self) -> int:
+        """Warp columns a group of binder positions and its stuffer columns take."""
+        return self.binder_ratio + (self.warp_ratio if self.stuffers else 0)
+
+    @property
     def binder_x(self) -> tuple[float, ...]:
         """x of each binder's centre (mm)."""
-        step = self.warp_columns // self.warp_positions
-        return tuple((step * p + 0.5) * self.warp_spacing for p in self.binder_position)
+        br, group = self.binder_ratio, self._group_columns
+        return tuple((group * (p // br) + p % br + 0.5) * self.warp_spacing for p in self.binder_position)
 
     @property
     def stuffer_x(self) -> tuple[float, ...]:
-        """x of each stuffer column's centre (mm), between binder positions; empty without stuffers."""
+        """x of each stuffer column's centre (mm), after each group of binder positions; empty without stuffers."""
         if not self.stuffers:
             return ()
-        return tuple((2 * p + 1.5) * self.warp_spacing for p in range(self.warp_positions))
+        br, group = self.binder_ratio, self._group_columns
+        return tuple((group * g + br + c + 0.5) * self.warp_spacing
+                     for g in range(self.warp_groups) for c in range(self.warp_ratio))
 
     @property
     def stuffer_gaps(self) -> tuple[int, ...]:
@@ -311,10 +368,14 @@ class UnitCell:
     # Dict form: the [weave] table.
 
     def to_dict(self) -> dict:
-        """The dict form, TOML and JSON ready; generated fields are written out as generated."""
+        """The dict form, TOML and JSON ready; generated fields are written out as generated, and
+        the fields the family does not take left out."""
         out = {}
+        takes = FAMILIES[self.family].takes
         for f in dataclass_fields(self):
             value = getattr(self, f.name)
+            if value is None or (f.name in FAMILY_FIELDS and f.name not in takes):
+                continue
             if isinstance(value, Section):
                 value = value.to_dict()
             elif f.name == "binder_path":
@@ -344,11 +405,16 @@ class UnitCell:
         d = fields.mapping(d, where)
         fields.only(d, _KEYS, where)
         kwargs = {}
-        for key in ("weft_per_layer", "weft_layers", "warp_positions", "binders"):
+        if "family" in d:
+            kwargs["family"] = fields.string(d["family"], "family", where)
+            check_choice(kwargs["family"], FAMILY_NAMES, f"{where} family", ConfigError)
+        for key in ("weft_per_layer", "weft_layers", "warp_positions", "binders", "warp_ratio", "binder_ratio",
+                    "binder_step"):
             if key in d:
                 kwargs[key] = fields.integer(d[key], key, where, 1)
-        if "stuffers" in d:
-            kwargs["stuffers"] = fields.integer(d["stuffers"], "stuffers", where, 0)
+        for key in ("stuffers", "binder_offset"):
+            if key in d:
+                kwargs[key] = fields.integer(d[key], key, where, 0)
         for key in ("warp_spacing", "weft_spacing", "thickness"):
             if key in d:
                 kwargs[key] = fields.number(d[key], key, where, positive=True)

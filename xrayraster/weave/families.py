@@ -1,0 +1,103 @@
+"""Weave families: how a unit cell's binders run through the weft stack, and which fields say so.
+
+Every family here is laid out on the same cell (:class:`~xrayraster.weave.UnitCell`): straight weft
+layers along x, straight warp stuffers along y in the gaps between them, and binders whose path is
+a gap per weft column (gap ``g`` lies between weft layers ``g − 1`` and ``g``; 0 below the bottom
+layer, ``n = weft_layers`` above the top one). A family is the rule for the binders' paths and its
+own defaults, with the names TexGen's users know. Where the binders run over the outer layers (all
+but layer to layer), ``margin_z`` defaults to the room they take there: the warp height.
+
+* ``layer_to_layer`` (the default): each binder links two adjacent weft layers, over the upper for
+  the first half of the columns and under the lower for the second, the positions staggered
+  (docs/weave.md); ``binders``, ``binder_position`` and ``binder_path`` may be given instead.
+* ``orthogonal``: straight stuffers in every gap (``stuffers`` defaults to ``n − 1``) held by one
+  through-thickness binder (z-yarn) per position, over the top layer (gap ``n``) for the first half
+  of the columns and under the bottom layer (gap 0) for the rest; ``binder_path`` may give another
+  sequence of 0s and ``n``s.
+* ``through_thickness_angle_interlock``: one binder per position climbing one gap every
+  ``binder_step`` columns from under the bottom layer to over the top one and back down, every
+  position in phase: a zig-zag of period ``2 · n · binder_step`` columns (``weft_per_layer`` defaults
+  to one period and must be a whole number of them).
+* ``offset_angle_interlock``: the same binders, position ``p`` shifted by ``p · binder_offset``
+  columns along the warp.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ..core.errors import WeaveError
+
+__all__ = ["FAMILIES", "FAMILY_NAMES", "Family"]
+
+#: Fields only some families take (every family takes the cell's other fields).
+FAMILY_FIELDS = ("binders", "binder_position", "binder_path", "binder_step", "binder_offset")
+
+
+@dataclass(frozen=True)
+class Family:
+    """A family's rule: the family-specific fields it ``takes`` (of :data:`FAMILY_FIELDS`)."""
+
+    name: str
+    takes: tuple[str, ...]
+
+    def default_stuffers(self, weft_layers: int) -> int:
+        return weft_layers - 1 if self.name == "orthogonal" else 0
+
+    def default_margin_z(self, thickness: float, weft_share: float, weft_layers: int) -> float:
+        """mm: 0.4 layer to layer; for binders that run over the outer layers, the margin that just
+        holds them: ``m`` equal to the warp height ``(1 − weft_share) · (thickness − 2m) / (n − 1)``."""
+        if self.name == "layer_to_layer":
+            return 0.4
+        rest = 1.0 - weft_share
+        return rest * thickness / (weft_layers - 1 + 2 * rest)
+
+    def period(self, weft_layers: int, step: int) -> int:
+        """The columns after which a binder's path repeats (0: any number of columns)."""
+        return 2 * weft_layers * step if self.name.endswith("angle_interlock") else 0
+
+    def default_weft_per_layer(self, weft_layers: int, step: int) -> int:
+        return self.period(weft_layers, step) or 4
+
+    def binder_count(self, warp_positions: int, weft_layers: int) -> int:
+        """Binders a cell has when ``binders`` is not given: one per position, or, layer to
+        layer, one per position and pair of adjacent weft layers."""
+        return warp_positions * (weft_layers - 1) if self.name == "layer_to_layer" else warp_positions
+
+    def path(self, i: int, n: int, w: int, p: int, step: int, offset: int) -> tuple[int, ...]:
+        """Binder ``i``'s gap at each of the ``w`` weft columns (``n`` weft layers, ``p`` positions)."""
+        if self.name == "layer_to_layer":
+            k = (i // p) % (n - 1)  # links weft layers k and k + 1
+            shift = (i % p) * w // p  # positions staggered along the warp
+            half = (w + 1) // 2
+            return tuple(k + 2 if (j - shift) % w < half else k for j in range(w))
+        if self.name == "orthogonal":
+            half = (w + 1) // 2
+            return tuple(n if j < half else 0 for j in range(w))
+        shift = (i % p) * offset if self.name == "offset_angle_interlock" else 0
+        period = self.period(n, step)
+        return tuple(_zigzag(((j - shift) % period) // step, n) for j in range(w))
+
+    def check_path(self, i: int, path: tuple[int, ...], n: int) -> None:
+        """Refuse a given path the family cannot weave (an orthogonal binder only runs over the top
+        or under the bottom)."""
+        if self.name == "orthogonal":
+            for j, g in enumerate(path):
+                if g not in (0, n):
+                    raise WeaveError(f"binder_path[{i}][{j}] = {g}: an orthogonal binder runs over the top layer "
+                                     f"(gap {n}) or under the bottom one (gap 0); use family = \"layer_to_layer\" "
+                                     "for binders between layers")
+
+
+def _zigzag(k: int, n: int) -> int:
+    """Gap of a through-thickness binder ``k`` steps into its period: 0, 1, …, n, n − 1, …, 1."""
+    return k if k <= n else 2 * n - k
+
+
+FAMILIES = {family.name: family for family in (
+    Family("layer_to_layer", ("binders", "binder_position", "binder_path")),
+    Family("orthogonal", ("binder_path",)),
+    Family("through_thickness_angle_interlock", ("binder_step",)),
+    Family("offset_angle_interlock", ("binder_step", "binder_offset")),
+)}
+FAMILY_NAMES = tuple(FAMILIES)
