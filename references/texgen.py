@@ -3,7 +3,8 @@ the weave benchmark (scripts/bench_weave.py) compares with it, tests/references/
 
 TexGen is the textile modeller users of layer-to-layer weaves have; this module builds the same
 layer-to-layer angle interlock as ``xrayraster.weave.Sample(cell, cells=(nx, ny))`` with TexGen's
-``CTextileLayerToLayer``, meshes every yarn with TexGen and reports what the weave benchmark
+``CTextileLayerToLayer`` (an orthogonal cell too: one binder a position, moved between the top and
+the bottom of the stack, its stuffers in every inner gap), meshes every yarn with TexGen and reports what the weave benchmark
 compares: generation time, triangle count, how many yarn meshes are closed, and the volume the
 yarns share (:func:`yarn_overlap`). Bench extra only: the package never imports it (GPL), and
 pytexgen is loaded on first use (:func:`texgen_available` gives the reason when it is missing).
@@ -130,6 +131,7 @@ class TexGenResult:
     convert_seconds: float
     meshes: tuple[trimesh.Trimesh, ...]
     kinds: tuple[str, ...]
+    centrelines: tuple[np.ndarray, ...]  # per yarn as ``kinds``: (k, 3) points (mm, our frame) of TexGen's path
     watertight_fraction: float
     refused: int
     interpenetration_mm3: float
@@ -180,6 +182,9 @@ def texgen_power(section: Section, width: float, height: float) -> float:
 def _binder_stacks(cell: UnitCell) -> tuple[int, tuple[tuple[int, ...], ...]]:
     """(L, top gap of each position's binder stack per weft column), or WeaveError if TexGen cannot."""
     n = cell.weft_layers
+    if (cell.warp_ratio, cell.binder_ratio) != (1, 1):
+        raise WeaveError(f"warp_ratio = {cell.warp_ratio}, binder_ratio = {cell.binder_ratio}: the TexGen peer maps "
+                         "alternating binder and stuffer columns only (both ratios 1)")
     if cell.stuffers not in (0, n - 1):
         raise WeaveError(f"stuffers = {cell.stuffers}: TexGen's layer-to-layer warps fill every inner gap, so the "
                          f"TexGen peer takes stuffers = 0 or weft_layers - 1 = {n - 1}")
@@ -276,8 +281,16 @@ def texgen_layer_to_layer(cell: UnitCell, cells=(1, 1), resolution: int = 24) ->
     return TexGenResult(build_seconds=built - start, mesh_seconds=meshed - built, convert_seconds=converted - meshed,
                         meshes=tuple(meshes),
                         kinds=tuple(kind for _, kind in yarns),
+                        centrelines=tuple(_centreline(yarn, cell.margin_z) for yarn, _ in yarns),
                         watertight_fraction=float(np.mean([m.is_watertight for m in meshes])),
                         refused=refused, interpenetration_mm3=volume)
+
+
+def _centreline(yarn, lift: float) -> np.ndarray:
+    """A TexGen yarn's slave nodes (its interpolated path, at the resolution it meshes with) as
+    (k, 3) points in our frame: TexGen (x, y, z) is our (y, x, z − ``lift``)."""
+    points = [node.GetPosition() for node in yarn.GetSlaveNodes(_core.CYarn.LINE)]
+    return np.array([(p.y, p.x, p.z + lift) for p in points])
 
 
 def yarn_overlap(meshes) -> tuple[float, int]:

@@ -35,6 +35,7 @@ def test_yarn_overlap_sums_shared_volume_and_counts_open_meshes():
     ({"cells": (0, 1)}, "cells"),
     ({"resolution": 3}, "resolution"),
     ({"cell": "default"}, "cell"),
+    ({"cell": UnitCell(family="orthogonal", warp_positions=2, warp_ratio=2)}, "warp_ratio"),
 ])
 def test_cells_texgen_cannot_build_are_refused_before_texgen_runs(kwargs, field):
     args = {"cell": UnitCell(), "cells": (1, 1), "resolution": 12} | kwargs
@@ -87,3 +88,35 @@ def test_texgen_textile_lands_on_our_cell():
         assert len(fits) == 1
         matched.add((cx, fits[0]))
     assert len(matched) == cell.binders * nx
+
+
+@pytest.mark.skipif(texgen_available() is not None, reason=f"TexGen peer: {texgen_available()}")
+def test_an_orthogonal_cell_matches_texgens():
+    """The same orthogonal cell from both (TexGen: its layer-to-layer textile with one binder a
+    position moved between the stack's top and bottom): the yarn volume fraction within 3 %, and
+    the binders' centre lines, TexGen's path points against ours, 0.1 of the binder's height apart
+    in RMS (at most a quarter where TexGen wraps the weft's corner and ours turns on its spline)."""
+    from xrayraster.weave import Sample
+    from xrayraster.weave.sweep import CubicSpline3
+
+    cell = UnitCell(family="orthogonal", weft_layers=3, weft_per_layer=4, warp_positions=2)
+    theirs = texgen_layer_to_layer(cell, (1, 1), resolution=24)
+    sample = Sample(cell, cells=(1, 1))
+    box = math.prod(cell.size)
+    ours_fraction = sum(mesh.volume for _, mesh in sample.meshes()) / box
+    theirs_fraction = sum(mesh.volume for mesh in theirs.meshes) / box
+    assert abs(ours_fraction / theirs_fraction - 1) < 0.03
+
+    curves = {}
+    for yarn in sample.yarns():
+        if yarn.kind == "binder":
+            spline = CubicSpline3(yarn.nodes, yarn.end_tangents)
+            curves[round(float(yarn.nodes[0, 0]), 6)] = spline(np.linspace(0.0, spline.length_parameter, 10000))
+    lines = [line for line, kind in zip(theirs.centrelines, theirs.kinds) if kind == "binder"]
+    assert len(lines) == len(curves) == cell.warp_positions
+    for line in lines:
+        line = line[(line[:, 1] >= 0) & (line[:, 1] <= cell.size[1])]  # the path inside the cell
+        ours = curves[round(float(line[0, 0]), 6)]
+        distance = np.min(np.linalg.norm(line[:, None, :] - ours[None, :, :], axis=2), axis=1)
+        assert np.sqrt(np.mean(distance**2)) < 0.1 * cell.warp_height
+        assert distance.max() < 0.25 * cell.warp_height

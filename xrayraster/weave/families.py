@@ -34,12 +34,23 @@ __all__ = ["FAMILIES", "FAMILY_NAMES", "Family"]
 FAMILY_FIELDS = ("binders", "binder_position", "binder_path", "binder_step", "binder_offset")
 
 
+#: An orthogonal binder's nodes over a weft column, in units of the weft's half-width from the
+#: column's centre (as :data:`~xrayraster.weave.sample.PLATEAU`, which the other families use): flat
+#: over most of the weft, so it drops nearly upright between two columns, as a z-yarn does. Against
+#: TexGen's binder over the same cell (tests/references/test_texgen_peer.py), whose path wraps the
+#: weft's corner and drops between the wefts, the centre lines lie 0.036 mm apart (RMS; 0.103 at the
+#: turns' corners) for a 0.571 mm binder, where the default plateau (±0.5) left 0.114 (0.284).
+ORTHOGONAL_PLATEAU = (-0.85, -0.75, 0.75, 0.85)
+
+
 @dataclass(frozen=True)
 class Family:
-    """A family's rule: the family-specific fields it ``takes`` (of :data:`FAMILY_FIELDS`)."""
+    """A family's rule: the family-specific fields it ``takes`` (of :data:`FAMILY_FIELDS`), and
+    its binders' nodes over a weft column (``plateau``; None: the sample's default)."""
 
     name: str
     takes: tuple[str, ...]
+    plateau: tuple[float, ...] | None = None
 
     def default_stuffers(self, weft_layers: int) -> int:
         return weft_layers - 1 if self.name == "orthogonal" else 0
@@ -96,7 +107,7 @@ def _zigzag(k: int, n: int) -> int:
 
 FAMILIES = {family.name: family for family in (
     Family("layer_to_layer", ("binders", "binder_position", "binder_path")),
-    Family("orthogonal", ("binder_path",)),
+    Family("orthogonal", ("binder_path",), ORTHOGONAL_PLATEAU),
     Family("through_thickness_angle_interlock", ("binder_step",)),
     Family("offset_angle_interlock", ("binder_step", "binder_offset")),
 )}

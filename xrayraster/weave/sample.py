@@ -47,6 +47,7 @@ from ..core.validate import show
 from ..scene.scene import Scene
 from .binders import binder_curvature_along, smallest_bend_radius_mm
 from .distort import Distortion, layer_shift, yarn_draws, yarn_rng
+from .families import FAMILIES
 from .export import (
     GENERATOR,
     REPORT_NAME,
@@ -148,9 +149,15 @@ class Sample:
         if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
             raise WeaveError(f"seed must be an integer >= 0, got {show(self.seed)}")
         object.__setattr__(self, "seed", int(self.seed))
-        self.distortion.check(self.cell, plateau_mm=(PLATEAU[-1] - PLATEAU[0]) * self.cell.weft_width / 2)
+        plateau = self.plateau
+        self.distortion.check(self.cell, plateau_mm=(plateau[-1] - plateau[0]) * self.cell.weft_width / 2)
 
     # Geometry ---------------------------------------------------------------------------
+
+    @property
+    def plateau(self) -> tuple[float, ...]:
+        """A binder's nodes over a weft column (:data:`PLATEAU`, or its family's own)."""
+        return FAMILIES[self.cell.family].plateau or PLATEAU
 
     @cached_property
     def path_sagitta_mm(self) -> float:
@@ -199,7 +206,7 @@ class Sample:
         its turns, as the family defines them (docs/weave.md)."""
         c = self.cell
         w = c.weft_per_layer
-        offsets = np.asarray(PLATEAU) * (c.weft_width / 2)
+        offsets = np.asarray(self.plateau) * (c.weft_width / 2)
         ys = ((columns + 0.5) * c.weft_spacing)[:, None] + offsets[None, :]
         heights = np.array([c.gap_z(path[j % w]) for j in columns])
         zs = np.repeat(heights[:, None], len(offsets), axis=1)
