@@ -348,3 +348,33 @@ def test_the_readmes_dataset_command_runs_as_written(gl, cl, tmp_path):
     assert run.returncode == 0, run.stderr
     out = tmp_path / command.split(" -o ", 1)[1].split()[0]
     assert len(list(csv.DictReader(open(out / "manifest.csv")))) == 8 and (out / "gallery.png").is_file()
+
+
+def test_a_build_drawing_the_weave_family_resumes_and_loads_in_nnunets_layout(gl, cl, tmp_path):
+    """Four tiny samples that draw the family among all of them, in nnU-Net's layout: built two
+    and then resumed to four, the same files as four built at once; every case loads with nibabel
+    and its labels are dataset.json's."""
+    nib = pytest.importorskip("nibabel", reason="the dataset extra (pip install \"xrayraster[dataset]\")")
+    from xrayraster.weave.families import FAMILY_NAMES
+
+    def dataset(folder: Path, count: int) -> Path:
+        folder.mkdir(exist_ok=True)
+        path = tiny(folder, count=count, layout="nnunet")
+        choices = ", ".join(f'"{name}"' for name in FAMILY_NAMES)
+        path.write_text(path.read_text() + f'"weave.family" = {{ choice = [{choices}] }}\n')
+        return path
+
+    resumed, whole = tmp_path / "resumed", tmp_path / "whole"
+    assert xr.build(dataset(tmp_path / "a", 2), resumed).built == (0, 1)
+    assert xr.build(dataset(tmp_path / "a", 4), resumed).built == (2, 3)
+    assert xr.build(dataset(tmp_path / "b", 4), whole).built == (0, 1, 2, 3)
+    cases = sorted(p.relative_to(whole) for p in [*whole.glob("images*/*.nii.gz"), *whole.glob("labels*/*.nii.gz")])
+    assert len(cases) == 8  # four images and four labels
+    assert all((resumed / c).read_bytes() == (whole / c).read_bytes() for c in cases)
+    drawn = {row["weave.family"] for row in csv.DictReader(open(whole / "manifest.csv"))}
+    assert len(drawn) >= 2, drawn  # the draw reaches more than one family
+    meta = json.loads((whole / "dataset.json").read_text())
+    assert meta["labels"] == {"background": 0, "matrix": 1, "weft": 2, "warp": 3}
+    for case in cases:
+        if case.parts[0].startswith("labels"):
+            assert set(np.unique(np.asarray(nib.load(whole / case).dataobj))) <= set(meta["labels"].values())

@@ -343,3 +343,37 @@ def test_every_family_scans_with_its_classes_ordered_as_they_attenuate(gl, cl, t
         assert core.sum() > 50, label
         means[label] = float(volume[core].mean())
     assert means[WARP] > means[WEFT] > means[MATRIX], means
+
+
+def test_binder_labels_relabel_exactly_the_binders(scanned, gl, cl, tmp_path):
+    """The thick scan again with ``labels = ["binder"]``: every voxel the classes labelled warp (its
+    warps are all binders) is binder (4), every other voxel as before, and warp stays named (3,
+    empty) so the class values run 0-4."""
+    root, _, _, classes, _ = scanned
+    path = tmp_path / "binder.toml"
+    path.write_text(thick_text().replace("[scan]", "[scan]\nlabels = [\"binder\"]", 1))
+    result = xr.scan(load_scan_file(path), gl=gl, cl=cl)
+    labels = result.labels.data
+    assert np.array_equal(labels == 4, classes == WARP) and labels[classes == WARP].size > 1000
+    assert np.array_equal(labels[classes != WARP], classes[classes != WARP])
+    assert result.metadata["labels"] == {"0": "background", "1": "matrix", "2": "weft", "3": "warp", "4": "binder"}
+    assert result.metadata["options"]["labels"] == ["binder"]
+
+
+@pytest.mark.parametrize("scan_table, message", [
+    ('labels = ["instances"]', r"labels\[0\] must be one of classes, binder"),
+    ('labels = "binder"', "labels must be a list of one label volume"),
+])
+def test_bad_label_choices_are_named(tmp_path, scan_table, message):
+    path = tmp_path / "bad.toml"
+    path.write_text(thick_text().replace("[scan]", f"[scan]\n{scan_table}", 1))
+    with pytest.raises(xr.ConfigError, match=message):
+        load_scan_file(path)
+
+
+def test_binder_labels_need_a_woven_sample(tmp_path):
+    path = tmp_path / "objects.toml"
+    path.write_text('[[objects]]\nname = "ball"\nmaterial = "water"\nmesh = { sphere = { radius = 1.0 } }\n'
+                    '[source]\nkvp = 40.0\n[scan]\nlabels = ["binder"]\n')
+    with pytest.raises(xr.ConfigError, match=r"labels = \[\"binder\"\] labels a woven sample's binders"):
+        load_scan_file(path)

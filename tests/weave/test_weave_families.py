@@ -184,3 +184,16 @@ def test_labels_agree_with_an_independent_inside_test(gl, family_sample):
         distance = np.min([np.abs(trimesh.proximity.signed_distance(m, centres[differ])) for m in meshes], axis=0)
         assert np.all(distance <= 1e-3 * min(grid.voxel_size)), centres[differ][distance > 1e-3 * min(grid.voxel_size)]
     assert set(np.unique(want)) == {0, 1, 2, 3}
+
+
+def test_binders_may_be_a_class_of_their_own_and_stuffers_stay_warp():
+    sample = Sample(UnitCell(family="orthogonal", weft_layers=3, warp_positions=2), cells=(1, 1), **COARSE)
+    kinds = {yarn.name: yarn.kind for yarn in sample.yarns()}
+    scene = sample.scene(binder_label=True)
+    by_kind = {}
+    for obj in scene.objects[1:]:  # the matrix first
+        by_kind.setdefault(kinds[obj.name], set()).add((obj.label, obj.priority))
+    assert by_kind == {"weft": {(2, 1)}, "stuffer": {(3, 2)}, "binder": {(4, 2)}}
+    assert {(o.label, o.priority) for o in sample.scene().objects} == {(1, 0), (2, 1), (3, 2)}  # the default
+    parts, _ = sample.parts(per="family", binder_label=True, measure=False)
+    assert [(p.name, p.label) for p in parts] == [("matrix", 1), ("weft", 2), ("warp", 3), ("binder", 4)]

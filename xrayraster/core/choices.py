@@ -20,6 +20,7 @@ EXPORT_PER = ("family", "yarn")  # one mesh file per yarn family or per yarn
 DATASET_LAYOUTS = ("tiff", "nnunet", "hdf5")  # how a dataset build lays out its samples
 DATASET_SPLITS = ("train", "val", "test")  # the parts a dataset's samples are split into, in draw order
 DATASET_KEEP = ("projections", "meshes")  # what a dataset build keeps beside each sample's volumes
+LABEL_CLASSES = ("classes", "binder")  # a woven scan's class volume: binders in warp (3), or a class of their own (4)
 
 
 def is_switch(value) -> bool:

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core import fields
-from ..core.choices import FILTERS, is_switch
+from ..core.choices import FILTERS, LABEL_CLASSES, is_switch
 from ..core.errors import ConfigError
 from ..core.estimate import plan
 from ..core.geometry import ConeBeamGeometry, ParallelBeamGeometry
@@ -70,7 +70,9 @@ class ScanOptions:
     sample wider than the field of view) and ``truncation_width`` (the extrapolation's width on
     each side, a share of the detector width, where the object's reach is unknown: a scan knows its
     sample's, so this applies to ``xrayraster reconstruct`` without ``--object-radius``), as
-    :func:`xrayraster.fdk` takes them."""
+    :func:`xrayraster.fdk` takes them; ``labels``, what the label volume of a woven sample holds:
+    ``["classes"]`` (matrix 1, weft 2, warp 3) or ``["binder"]`` (the binders a class of their own,
+    4; the stuffers stay warp) (docs/labels.md)."""
 
     seed: int = 0
     noise: bool = True
@@ -78,6 +80,11 @@ class ScanOptions:
     mesh_tolerance_voxels: float = 0.05
     truncation: str | bool = "auto"
     truncation_width: float = DEFAULT_WIDTH
+    labels: tuple[str, ...] = ("classes",)
+
+    @property
+    def binder_label(self) -> bool:
+        return "binder" in self.labels
 
     @classmethod
     def from_dict(cls, d: dict, where: str) -> "ScanOptions":
@@ -101,10 +108,16 @@ class ScanOptions:
                                   f"got {d['truncation_width']!r}")
         if "filter" in d:
             options["filter"] = fields.choice(d["filter"], "filter", where, FILTERS)
+        if "labels" in d:
+            labels = d["labels"]
+            if not isinstance(labels, list) or len(labels) != 1:
+                raise ConfigError(f"{where}: labels must be a list of one label volume, [\"classes\"] or "
+                                  f"[\"binder\"], got {labels!r}")
+            options["labels"] = (fields.choice(labels[0], "labels[0]", where, LABEL_CLASSES),)
         return cls(**options)
 
     def to_dict(self) -> dict:
-        return dataclasses.asdict(self)
+        return {**dataclasses.asdict(self), "labels": list(self.labels)}
 
 
 @dataclass(frozen=True)
@@ -137,7 +150,8 @@ class ScanFile:
             return self.scene
         lo, hi = self.weave.sample.box
         centred = self.pose.transform @ Transform.translation(-(lo + hi) / 2)
-        return self.weave.sample.scene(self.weave.materials, transform=centred, progress=progress)
+        return self.weave.sample.scene(self.weave.materials, transform=centred, progress=progress,
+                                       binder_label=self.options.binder_label)
 
     def with_mount(self, sample: Scene) -> Scene:
         """What the projections see: ``sample`` (from :meth:`sample_scene`, which the labels are made
@@ -186,6 +200,9 @@ def load_scan_file(source, *, where: str = "scan table", base_dir=None) -> ScanF
     if "source" not in data:
         raise ConfigError(f"{path}: missing [source] table (the X-ray tube, e.g. kvp = 40); a scan makes radiographs")
     options = ScanOptions.from_dict(fields.table(data.get("scan", {}), "scan", f"{path}"), f"{path} [scan]")
+    if options.binder_label and not has_weave:
+        raise ConfigError(f"{path} [scan]: labels = [\"binder\"] labels a woven sample's binders; this file's sample "
+                          "is [[objects]], whose labels are their own: remove labels or give a [weave]")
     volume = VolumeGeometry.from_dict(data["volume"], f"{path} [volume]") if "volume" in data else None
     materials = parse_materials(data["materials"], f"{path} [materials]") if "materials" in data else None
     pose = Pose.from_dict(fields.table(data["pose"], "pose", f"{path}"), f"{path} [pose]") if "pose" in data else Pose()

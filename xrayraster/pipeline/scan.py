@@ -258,8 +258,10 @@ def _version(name: str) -> str | None:
 def label_names(scene, *, woven: bool) -> dict[str, str]:
     """Each label value of the label volume (as a string, JSON's key type) → its name: 0 "background" (as nnU-Net
     names it, and xr.ml and the dataset layouts; a mount is background too); a
-    woven sample's families by name (1 matrix, 2 weft, 3 warp, whatever its yarns are called) and a
-    tracer with a label of its own by its yarn's name; an object by its name (several objects
+    woven sample's families by name (1 matrix, 2 weft, 3 warp, 4 binder where binders are a class,
+    whatever its yarns are called), every class below the highest one named even where no yarn
+    has it (a cell whose warps are all binders: its class values stay consecutive, as nnU-Net wants),
+    and a tracer with a label of its own by its yarn's name; an object by its name (several objects
     sharing a label: their names joined by "+")."""
     families = {label: family for family, label in WEAVE_LABELS.items()} if woven else {}
     names: dict[int, list[str]] = {}
@@ -267,6 +269,9 @@ def label_names(scene, *, woven: bool) -> dict[str, str]:
         name = families.get(o.label, o.name)
         if name not in names.setdefault(o.label, []):
             names[o.label].append(name)
+    highest = max((label for label in names if label in families), default=0)
+    for label in range(1, highest):
+        names.setdefault(label, [families[label]])
     return {"0": "background", **{str(label): "+".join(names[label]) for label in sorted(names)}}
 
 

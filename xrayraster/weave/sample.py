@@ -342,7 +342,7 @@ class Sample:
         return out
 
     def parts(self, materials=None, *, per: str = "yarn", resolve: str = "priority", measure: bool = True,
-              progress: bool = False) -> tuple[list[MeshPart], dict]:
+              progress: bool = False, binder_label: bool = False) -> tuple[list[MeshPart], dict]:
         """The sample's objects (:class:`~xrayraster.weave.export.MeshPart`), and facts about its yarns.
 
         ``materials`` as for :meth:`scene`. ``per="yarn"``: the matrix and one part per yarn;
@@ -355,29 +355,37 @@ class Sample:
         sample by kind (clipped remnants left out), ``tracers`` (their names), and ``interpenetration_mm3``: the volume between
         yarns ``before`` and ``after`` resolving (``after`` None for ``"priority"``); with
         ``measure=False`` that is empty unless the per-yarn boolean measured it anyway (a scan needs none).
+        ``binder_label``: the binders labelled as a class of their own (``LABELS["binder"]``, a part of
+        their own per family), the stuffers staying warp; their material and priority the warp's.
         """
         check_choice(per, EXPORT_PER, "per", WeaveError)
         check_choice(resolve, WEAVE_RESOLVE, "resolve", WeaveError)
         plan(WeaveJob(self, resolve, export=False), WeaveError)  # the boolean's pairs hold far more
         family_materials, tracers = self._materials(materials)
+        family_materials = {**family_materials, "binder": family_materials["warp"]}
         pieces = self.meshes(progress)
+
+        def labelled(yarn) -> str:  # the family a yarn is labelled as
+            return "binder" if binder_label and yarn.kind == "binder" else yarn.family
+
         matrix = self.matrix_mesh()
         if per == "yarn" and resolve == "boolean":
             _stage(progress, "resolving every yarn pair (boolean)")
             resolved = resolve_boolean(pieces, self.box, measure_after=False)  # excess is exact and cheap
             matrix = resolved.matrix
-            objects = [(yarn.name, yarn.family, mesh) for yarn, mesh in resolved.pieces]
+            objects = [(yarn.name, labelled(yarn), mesh) for yarn, mesh in resolved.pieces]
             overlap = {"before": resolved.before.volume, "after": max(resolved.excess, 0.0),
                        "dropped_yarns": list(resolved.dropped)}
         else:
             _stage(progress and measure, "measuring the interpenetration of the yarns")
             overlap = {"before": interpenetration(pieces).volume, "after": None} if measure else {}
-            objects = [(yarn.name, yarn.family, mesh) for yarn, mesh in pieces
+            objects = [(yarn.name, labelled(yarn), mesh) for yarn, mesh in pieces
                        if per == "yarn" or yarn.name in tracers]
             if per == "family":
                 _stage(progress, "merging each family's yarns")
-                objects = [(f, f, merge_meshes([m for y, m in pieces if y.family == f and y.name not in tracers]))
-                           for f in ("weft", "warp")] + objects
+                groups = ("weft", "warp", "binder") if binder_label else ("weft", "warp")
+                merged = [(f, [m for y, m in pieces if labelled(y) == f and y.name not in tracers]) for f in groups]
+                objects = [(f, f, merge_meshes(meshes)) for f, meshes in merged if meshes] + objects
             if resolve == "boolean":  # a few parts: settled here, without touching shells inside a family
                 objects, matrix, after = settle(objects, PRIORITIES, self.box)
                 overlap.update({"after": after} if measure else {})
@@ -393,7 +401,7 @@ class Sample:
                        "interpenetration_mm3": overlap}
 
     def scene(self, materials=None, *, resolve: str = "priority", per: str = "yarn", transform=None,
-              progress: bool = False) -> Scene:
+              progress: bool = False, binder_label: bool = False) -> Scene:
         """An ``xr.Scene``: the matrix box (label 1, priority 0), wefts (2, 1) and warps (3, 2).
 
         ``materials``: a :class:`~xrayraster.weave.materials.YarnMaterials`, None for its defaults
@@ -401,10 +409,12 @@ class Sample:
         ``matrix``/``weft``/``warp`` fields. A tracer yarn takes its own material and keeps its
         family's priority, and its family's label unless the tracer gives one. ``resolve`` and ``per``
         as for :meth:`parts` (scanning needs no boolean: the priorities settle shared space exactly);
-        ``transform`` (an ``xr.Transform``) places every object in the scanner frame.
+        ``transform`` (an ``xr.Transform``) places every object in the scanner frame; ``binder_label``:
+        the binders as a class of their own (label 4, :meth:`parts`).
         """
         scene = Scene()
-        for part in self.parts(materials, per=per, resolve=resolve, measure=False, progress=progress)[0]:
+        for part in self.parts(materials, per=per, resolve=resolve, measure=False, progress=progress,
+                               binder_label=binder_label)[0]:
             scene.add(part.mesh, part.material, label=part.label, priority=part.priority, name=part.name,
                       transform=transform)
         return scene

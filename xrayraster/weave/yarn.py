@@ -13,9 +13,10 @@ from .sweep import ellipse, lenticular, power_ellipse, rounded_rectangle, yarn_m
 
 __all__ = ["LABELS", "PRIORITIES", "Yarn", "section_outline"]
 
-#: Label volume values and scene priorities: warp over weft over matrix where they share space.
-LABELS = {"matrix": 1, "weft": 2, "warp": 3}
-PRIORITIES = {"matrix": 0, "weft": 1, "warp": 2}
+#: Label volume values and scene priorities: warp over weft over matrix where they share space. A
+#: binder is a warp; labelled as a class of its own (``binder_label``), it keeps the warp's priority.
+LABELS = {"matrix": 1, "weft": 2, "warp": 3, "binder": 4}
+PRIORITIES = {"matrix": 0, "weft": 1, "warp": 2, "binder": 2}
 
 
 def section_outline(section: Section, width: float, height: float, k: int) -> np.ndarray:
