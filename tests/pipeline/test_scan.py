@@ -362,7 +362,9 @@ def test_binder_labels_relabel_exactly_the_binders(scanned, gl, cl, tmp_path):
 
 @pytest.mark.parametrize("scan_table, message", [
     ('labels = ["instances"]', r"labels\[0\] must be one of classes, binder"),
-    ('labels = "binder"', "labels must be a list of one label volume"),
+    ('labels = "binder"', "labels must be a list of label volumes, the classes first"),
+    ('labels = ["classes", "binder"]', r"labels\[1\] must be one of instances"),
+    ('labels = ["classes", "instances", "instances"]', "names a label volume twice"),
 ])
 def test_bad_label_choices_are_named(tmp_path, scan_table, message):
     path = tmp_path / "bad.toml"
@@ -375,5 +377,27 @@ def test_binder_labels_need_a_woven_sample(tmp_path):
     path = tmp_path / "objects.toml"
     path.write_text('[[objects]]\nname = "ball"\nmaterial = "water"\nmesh = { sphere = { radius = 1.0 } }\n'
                     '[source]\nkvp = 40.0\n[scan]\nlabels = ["binder"]\n')
-    with pytest.raises(xr.ConfigError, match=r"labels = \[\"binder\"\] labels a woven sample's binders"):
+    with pytest.raises(xr.ConfigError, match=r"labels = \[.binder.\] labels a woven sample.s yarns"):
         load_scan_file(path)
+
+
+def test_instance_labels_give_every_yarn_its_own_id(scanned, gl, cl, tmp_path):
+    """``labels = ["classes", "instances"]``: beside the same class volume, one id per yarn. Every
+    yarn voxel of the classes (weft or warp) has an id and every matrix or background voxel none;
+    each id's voxels are of one class, the class of its yarn's family as scan.json lists it; every
+    yarn of the sample that reaches a voxel centre has its own id; the files are written."""
+    root, _, _, classes, _ = scanned
+    path = tmp_path / "instances.toml"
+    path.write_text(thick_text().replace("[scan]", "[scan]\nlabels = [\"classes\", \"instances\"]", 1))
+    result = xr.scan(load_scan_file(path), gl=gl, cl=cl)
+    ids, table = result.instances.data, result.metadata["instances"]
+    assert np.array_equal(result.labels.data, classes)  # the classes are unchanged
+    assert np.array_equal(ids > 0, (classes == WEFT) | (classes == WARP))
+    family_class = {"weft": WEFT, "warp": WARP}
+    for key, yarn in table.items():
+        values = np.unique(classes[ids == int(key)])
+        assert values.tolist() == [family_class[yarn["family"]]], (key, yarn)
+    assert set(np.unique(ids)) - {0} == {int(k) for k in table}  # every listed yarn reaches a voxel here
+    assert len({y["name"] for y in table.values()}) == len(table)
+    out = result.save(tmp_path / "out")
+    assert (out / "instances.tif").exists() and tifffile.imread(out / "instances.tif").dtype == ids.dtype

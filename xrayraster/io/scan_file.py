@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core import fields
-from ..core.choices import FILTERS, LABEL_CLASSES, is_switch
+from ..core.choices import FILTERS, LABEL_CLASSES, LABEL_EXTRAS, is_switch
 from ..core.errors import ConfigError
 from ..core.estimate import plan
 from ..core.geometry import ConeBeamGeometry, ParallelBeamGeometry
@@ -70,9 +70,10 @@ class ScanOptions:
     sample wider than the field of view) and ``truncation_width`` (the extrapolation's width on
     each side, a share of the detector width, where the object's reach is unknown: a scan knows its
     sample's, so this applies to ``xrayraster reconstruct`` without ``--object-radius``), as
-    :func:`xrayraster.fdk` takes them; ``labels``, what the label volume of a woven sample holds:
-    ``["classes"]`` (matrix 1, weft 2, warp 3) or ``["binder"]`` (the binders a class of their own,
-    4; the stuffers stay warp) (docs/labels.md)."""
+    :func:`xrayraster.fdk` takes them; ``labels``, the label volumes of a woven sample: first its
+    classes, ``"classes"`` (matrix 1, weft 2, warp 3) or ``"binder"`` (the binders a class of their
+    own, 4; the stuffers stay warp), then, optionally, ``"instances"`` (one id per yarn, uint16,
+    beside them) (docs/labels.md)."""
 
     seed: int = 0
     noise: bool = True
@@ -85,6 +86,10 @@ class ScanOptions:
     @property
     def binder_label(self) -> bool:
         return "binder" in self.labels
+
+    @property
+    def instances(self) -> bool:
+        return "instances" in self.labels
 
     @classmethod
     def from_dict(cls, d: dict, where: str) -> "ScanOptions":
@@ -110,10 +115,14 @@ class ScanOptions:
             options["filter"] = fields.choice(d["filter"], "filter", where, FILTERS)
         if "labels" in d:
             labels = d["labels"]
-            if not isinstance(labels, list) or len(labels) != 1:
-                raise ConfigError(f"{where}: labels must be a list of one label volume, [\"classes\"] or "
-                                  f"[\"binder\"], got {labels!r}")
-            options["labels"] = (fields.choice(labels[0], "labels[0]", where, LABEL_CLASSES),)
+            if not isinstance(labels, list) or not labels:
+                raise ConfigError(f"{where}: labels must be a list of label volumes, the classes first: "
+                                  f"[\"classes\"], [\"binder\"] or with \"instances\" after them, got {labels!r}")
+            chosen = [fields.choice(labels[0], "labels[0]", where, LABEL_CLASSES)]
+            chosen += [fields.choice(x, f"labels[{i}]", where, LABEL_EXTRAS) for i, x in enumerate(labels[1:], 1)]
+            if len(set(chosen)) != len(chosen):
+                raise ConfigError(f"{where}: labels names a label volume twice: {labels!r}")
+            options["labels"] = tuple(chosen)
         return cls(**options)
 
     def to_dict(self) -> dict:
@@ -200,9 +209,9 @@ def load_scan_file(source, *, where: str = "scan table", base_dir=None) -> ScanF
     if "source" not in data:
         raise ConfigError(f"{path}: missing [source] table (the X-ray tube, e.g. kvp = 40); a scan makes radiographs")
     options = ScanOptions.from_dict(fields.table(data.get("scan", {}), "scan", f"{path}"), f"{path} [scan]")
-    if options.binder_label and not has_weave:
-        raise ConfigError(f"{path} [scan]: labels = [\"binder\"] labels a woven sample's binders; this file's sample "
-                          "is [[objects]], whose labels are their own: remove labels or give a [weave]")
+    if options.labels != ("classes",) and not has_weave:
+        raise ConfigError(f"{path} [scan]: labels = {list(options.labels)} labels a woven sample's yarns; this file's "
+                          "sample is [[objects]], whose labels are their own: remove labels or give a [weave]")
     volume = VolumeGeometry.from_dict(data["volume"], f"{path} [volume]") if "volume" in data else None
     materials = parse_materials(data["materials"], f"{path} [materials]") if "materials" in data else None
     pose = Pose.from_dict(fields.table(data["pose"], "pose", f"{path}"), f"{path} [pose]") if "pose" in data else Pose()

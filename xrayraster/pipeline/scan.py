@@ -34,6 +34,7 @@ from ..physics.starvation import refuse_if_starved, starved_share, warn_if_starv
 from ..recon.fdk import FDKStream, Volume
 from ..recon.fdk_weights import footprint_radius
 from ..recon.opencl import CLContext
+from ..scene.scene import Scene
 from ..simulate.renderer import Renderer
 from ..weave.yarn import LABELS as WEAVE_LABELS
 from .plan import ScanJob
@@ -42,7 +43,7 @@ __all__ = ["ScanResult", "check_scan_output", "scan"]
 
 GENERATOR = "xrayraster scan"
 VOLUME_NAME, LABELS_NAME, METADATA_NAME, SLICES_NAME = "volume.tif", "labels.tif", "scan.json", "slices.png"
-PROJECTIONS_NAME = "projections.tif"
+PROJECTIONS_NAME, INSTANCES_NAME = "projections.tif", "instances.tif"
 _LIBRARIES = ("numpy", "moderngl", "pyopencl", "manifold3d", "xraylib", "spekpy")
 # Views rendered, then filtered and backprojected, per batch: 32 MiB of line integrals at 512²,
 # and (measured) as fast in the backprojection as the FDK's largest batches. docs/scan.md
@@ -59,12 +60,15 @@ _PER_VIEW = ("views", "bins_used", "dropped_signal_share", "starved_pixels", "co
 class ScanResult:
     """``volume`` (:class:`~xrayraster.Volume`, cm⁻¹), ``labels`` (:class:`~xrayraster.LabelVolume`) on
     the same grid, and ``metadata``: every parameter, the seed, library versions, device names,
-    per-stage wall times (s) and the peak resident memory (MiB), as ``scan.json`` stores them."""
+    per-stage wall times (s) and the peak resident memory (MiB), as ``scan.json`` stores them;
+    ``instances``, one id per yarn on the same grid where the scan file asks (``metadata["instances"]``
+    names each id's yarn)."""
 
     volume: Volume
     labels: LabelVolume
     metadata: dict
     projections: Projections | None = None  # kept only when asked (scan(..., keep_projections=True))
+    instances: LabelVolume | None = None
 
     def save(self, directory, *, overwrite: bool = False) -> Path:
         """Write ``volume.tif`` (float32, cm⁻¹), ``labels.tif``, ``scan.json`` and ``slices.png`` into
@@ -75,27 +79,30 @@ class ScanResult:
         else :class:`~xrayraster.ConfigError`; ``overwrite=True`` then replaces the earlier scan's
         files and keeps every other entry. A link is followed. Returns ``directory``."""
         with atomic_directory(directory, marker=METADATA_NAME, generator=GENERATOR, overwrite=overwrite,
-                              names=output_names(self.projections is not None)) as tmp:
+                              names=output_names(self.projections is not None, self.instances is not None)) as tmp:
             self.volume.save(tmp / VOLUME_NAME, quicklook=False)
             if self.projections is not None:
                 self.projections.save(tmp / PROJECTIONS_NAME)
             self.labels.save(tmp / LABELS_NAME, quicklook=False)
+            if self.instances is not None:
+                self.instances.save(tmp / INSTANCES_NAME, quicklook=False)
             write_slices(tmp / SLICES_NAME, self.volume.data, self.labels.data, names=self.metadata.get("labels"),
                          grid=self.volume.geometry)
             atomic_write_text(tmp / METADATA_NAME, json.dumps(self.metadata, indent=2) + "\n")
         return Path(directory)
 
 
-def output_names(projections: bool) -> tuple[str, ...]:
-    """The names a scan writes into its directory (with or without the projections)."""
+def output_names(projections: bool, instances: bool = False) -> tuple[str, ...]:
+    """The names a scan writes into its directory (with or without the projections and instances)."""
     kept = (PROJECTIONS_NAME, quicklook_path(Path(PROJECTIONS_NAME)).name) if projections else ()
-    return (VOLUME_NAME, LABELS_NAME, METADATA_NAME, SLICES_NAME, *kept)
+    return (VOLUME_NAME, LABELS_NAME, METADATA_NAME, SLICES_NAME, *kept, *((INSTANCES_NAME,) if instances else ()))
 
 
-def check_scan_output(directory, *, overwrite: bool = False, projections: bool = False) -> Path:
+def check_scan_output(directory, *, overwrite: bool = False, projections: bool = False,
+                      instances: bool = False) -> Path:
     """Refuse, before any work, an output directory that :meth:`ScanResult.save` would refuse."""
     return check_output_directory(directory, marker=METADATA_NAME, generator=GENERATOR, overwrite=overwrite,
-                                  names=output_names(projections))
+                                  names=output_names(projections, instances))
 
 
 def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False, allow_starved: bool = False,
@@ -144,6 +151,10 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False, a
                 volume = stream.result()
         with _timed(seconds, "labels"):
             labels = voxelize(scene, loaded.volume, context=renderer.gl)
+            instances, yarns = None, None
+            if options.instances:
+                instance_scene, yarns = yarn_instances(scene, loaded.weave.sample)
+                instances = voxelize(instance_scene, loaded.volume, context=renderer.gl)
         devices = {"gl_renderer": renderer.gl.renderer, "opencl_device": str(cl.info)}
     provenance = _joined(provenances)
     starved = starved_share(provenance["starved_covered_pixels"], provenance["covered_pixels"])
@@ -163,6 +174,7 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False, a
         "seed": options.seed,
         "sample": loaded.weave_report or _objects_report(scene),
         "labels": label_names(scene, woven=loaded.weave is not None),
+        **({"instances": yarns} if yarns is not None else {}),
         "mesh_resolution": loaded.mesh_resolution,
         "triangles": scene.num_triangles,
         "projections": {"batch_views": stream.batch_views, "bins_used": max(provenance["bins_used"]),
@@ -184,7 +196,26 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False, a
         # ru_maxrss is in KiB on Linux: the process's peak, which the scan's stages set.
         "peak_rss_mib": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
     }
-    return ScanResult(volume, labels, metadata, projections)
+    return ScanResult(volume, labels, metadata, projections, instances)
+
+
+def yarn_instances(scene, sample) -> tuple[Scene, dict[str, dict]]:
+    """The woven ``scene``'s yarns, each labelled with its own id (1, 2, … in the scene's order; the
+    matrix left out, so it is 0 with the background), with their priorities: the scene whose label
+    volume is one id per yarn. And each id's yarn, as ``scan.json``'s ``instances`` lists it: name,
+    family (weft or warp), kind (weft, binder or stuffer), its index among the sample's yarns
+    (:meth:`~xrayraster.weave.Sample.yarns`) and material."""
+    yarns = {yarn.name: (index, yarn) for index, yarn in enumerate(sample.yarns())}
+    out, table = Scene(), {}
+    for obj in scene.objects:
+        if obj.name not in yarns:
+            continue  # the matrix
+        index, yarn = yarns[obj.name]
+        label = len(table) + 1
+        out.add(obj.mesh, obj.material, label=label, priority=obj.priority, name=obj.name)
+        table[str(label)] = {"name": obj.name, "family": yarn.family, "kind": yarn.kind, "index": index,
+                             "material": obj.material.name}
+    return out, table
 
 
 def _project_into(stream: FDKStream, renderer: Renderer, scanned, loaded: ScanFile, seconds: dict, progress,
