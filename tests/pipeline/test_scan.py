@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import importlib
 import json
+import math
 import re
 from pathlib import Path
 
@@ -22,6 +23,7 @@ from scipy import ndimage
 import xrayraster as xr
 from xrayraster import cli
 from xrayraster.pipeline import load_scan_file
+from xrayraster.weave.sample import PLATEAU
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "examples" / "scan_small.toml"
@@ -401,3 +403,51 @@ def test_instance_labels_give_every_yarn_its_own_id(scanned, gl, cl, tmp_path):
     assert len({y["name"] for y in table.values()}) == len(table)
     out = result.save(tmp_path / "out")
     assert (out / "instances.tif").exists() and tifffile.imread(out / "instances.tif").dtype == ids.dtype
+
+
+def test_direction_labels_follow_the_yarns(scanned, gl, cl, tmp_path):
+    """``labels = ["classes", "directions"]``: 0 outside the yarns, a unit vector in them; every weft
+    voxel of the regular weave points along x to 1e-3; and the binders of a through-thickness angle
+    interlock, over the middle of the columns they climb through, make the path's analytic slope
+    (straight from one turn's plateau to the next, docs/weave.md) within 1°."""
+    _, _, _, classes, _ = scanned
+    path = tmp_path / "directions.toml"
+    path.write_text(thick_text().replace("[scan]", "[scan]\nlabels = [\"classes\", \"directions\"]", 1))
+    result = xr.scan(load_scan_file(path), gl=gl, cl=cl)
+    d = result.directions.astype(np.float64)
+    assert result.directions.dtype == np.float16 and d.shape == (3, *classes.shape)
+    yarn = (classes == WEFT) | (classes == WARP)
+    assert np.all(d[:, ~yarn] == 0)
+    assert np.allclose(np.linalg.norm(d[:, yarn], axis=0), 1, atol=2e-3)
+    assert np.all(np.abs(d[:, classes == WEFT] - np.array([[1.0], [0.0], [0.0]])) <= 1e-3)
+    out = result.save(tmp_path / "out")
+    assert np.array_equal(tifffile.imread(out / "directions.tif"), result.directions)
+
+    family = "through_thickness_angle_interlock"
+    path = tmp_path / "ttai.toml"
+    text = thick_text().replace(THICK_CELL, "\n[weave]\n" + FAMILY_CELLS[family], 1)
+    path.write_text(text.replace("[scan]", "[scan]\nlabels = [\"classes\", \"directions\"]", 1))
+    loaded = load_scan_file(path)
+    result = xr.scan(loaded, gl=gl, cl=cl)
+    cell = loaded.weave.sample.cell
+    # Straight from the edge of the plateau over the weft it turns under (gap 0) to the start of the
+    # one over the weft two columns on (gap 2): plateaus of ±PLATEAU[-1] of the weft's half-width.
+    run = 2 * cell.weft_spacing - 2 * PLATEAU[-1] * cell.weft_width / 2
+    slope = math.degrees(math.atan((cell.gap_z(2) - cell.gap_z(0)) / run))
+    lo, hi = loaded.weave.sample.box
+    grid = result.volume.geometry
+    z = grid.axis_centres(0)[:, None] + (lo[2] + hi[2]) / 2  # the sample's z and y of each voxel
+    y = grid.axis_centres(1)[None, :] + (lo[1] + hi[1]) / 2
+    near = np.zeros(z.shape[:1] + y.shape[1:], bool)  # (z, y): on the straight middle of a climb
+    for j in range(cell.weft_per_layer):
+        before, here, after = (cell.binder_path[0][(j + d) % cell.weft_per_layer] for d in (-1, 0, 1))
+        if here == 1:  # gaps 0, 1, 2, 1: climbing (or falling) through column j
+            centre = (j + 0.5) * cell.weft_spacing
+            line = cell.gap_z(1) + (y - centre) * (after - before) / 2 * math.tan(math.radians(slope)) * (
+                cell.gap_z(2) - cell.gap_z(0)) / abs(cell.gap_z(2) - cell.gap_z(0))
+            near |= (np.abs(y - centre) < 0.1 * cell.weft_spacing) & (np.abs(z - line) < 0.25 * cell.warp_height)
+    binder = (result.labels.data == WARP) & near[:, :, None]
+    d = result.directions.astype(np.float64)[:, binder]
+    angles = np.degrees(np.arctan2(np.abs(d[2]), np.abs(d[1])))
+    assert binder.sum() > 50
+    assert np.all(np.abs(angles - slope) < 1.0), (slope, angles.min(), angles.max())

@@ -73,7 +73,7 @@ class ScanOptions:
     :func:`xrayraster.fdk` takes them; ``labels``, the label volumes of a woven sample: first its
     classes, ``"classes"`` (matrix 1, weft 2, warp 3) or ``"binder"`` (the binders a class of their
     own, 4; the stuffers stay warp), then, optionally, ``"instances"`` (one id per yarn, uint16,
-    beside them) (docs/labels.md)."""
+    beside them) and ``"directions"`` (each yarn voxel's yarn direction) (docs/labels.md)."""
 
     seed: int = 0
     noise: bool = True
@@ -90,6 +90,10 @@ class ScanOptions:
     @property
     def instances(self) -> bool:
         return "instances" in self.labels
+
+    @property
+    def directions(self) -> bool:
+        return "directions" in self.labels
 
     @classmethod
     def from_dict(cls, d: dict, where: str) -> "ScanOptions":
@@ -157,10 +161,13 @@ class ScanFile:
         axis; posed either way."""
         if self.weave is None:
             return self.scene
-        lo, hi = self.weave.sample.box
-        centred = self.pose.transform @ Transform.translation(-(lo + hi) / 2)
-        return self.weave.sample.scene(self.weave.materials, transform=centred, progress=progress,
+        return self.weave.sample.scene(self.weave.materials, transform=self.weave_placement(), progress=progress,
                                        binder_label=self.options.binder_label)
+
+    def weave_placement(self) -> Transform:
+        """Where the weave's frame lands in the scanner's: its box centred on the axis, posed."""
+        lo, hi = self.weave.sample.box
+        return self.pose.transform @ Transform.translation(-(lo + hi) / 2)
 
     def with_mount(self, sample: Scene) -> Scene:
         """What the projections see: ``sample`` (from :meth:`sample_scene`, which the labels are made

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import tifffile
 
 from ..core.errors import ConfigError
 from ..core.estimate import plan
@@ -36,14 +37,16 @@ from ..recon.fdk_weights import footprint_radius
 from ..recon.opencl import CLContext
 from ..scene.scene import Scene
 from ..simulate.renderer import Renderer
+from ..weave.directions import direction_field
 from ..weave.yarn import LABELS as WEAVE_LABELS
+from ..weave.yarn import Yarn
 from .plan import ScanJob
 
 __all__ = ["ScanResult", "check_scan_output", "scan"]
 
 GENERATOR = "xrayraster scan"
 VOLUME_NAME, LABELS_NAME, METADATA_NAME, SLICES_NAME = "volume.tif", "labels.tif", "scan.json", "slices.png"
-PROJECTIONS_NAME, INSTANCES_NAME = "projections.tif", "instances.tif"
+PROJECTIONS_NAME, INSTANCES_NAME, DIRECTIONS_NAME = "projections.tif", "instances.tif", "directions.tif"
 _LIBRARIES = ("numpy", "moderngl", "pyopencl", "manifold3d", "xraylib", "spekpy")
 # Views rendered, then filtered and backprojected, per batch: 32 MiB of line integrals at 512²,
 # and (measured) as fast in the backprojection as the FDK's largest batches. docs/scan.md
@@ -62,13 +65,15 @@ class ScanResult:
     the same grid, and ``metadata``: every parameter, the seed, library versions, device names,
     per-stage wall times (s) and the peak resident memory (MiB), as ``scan.json`` stores them;
     ``instances``, one id per yarn on the same grid where the scan file asks (``metadata["instances"]``
-    names each id's yarn)."""
+    names each id's yarn), and ``directions``, each yarn voxel's yarn direction, ``(3, z, y, x)``
+    float16 (x, y, z) components (:func:`~xrayraster.weave.directions.direction_field`)."""
 
     volume: Volume
     labels: LabelVolume
     metadata: dict
     projections: Projections | None = None  # kept only when asked (scan(..., keep_projections=True))
     instances: LabelVolume | None = None
+    directions: np.ndarray | None = None
 
     def save(self, directory, *, overwrite: bool = False) -> Path:
         """Write ``volume.tif`` (float32, cm⁻¹), ``labels.tif``, ``scan.json`` and ``slices.png`` into
@@ -79,30 +84,35 @@ class ScanResult:
         else :class:`~xrayraster.ConfigError`; ``overwrite=True`` then replaces the earlier scan's
         files and keeps every other entry. A link is followed. Returns ``directory``."""
         with atomic_directory(directory, marker=METADATA_NAME, generator=GENERATOR, overwrite=overwrite,
-                              names=output_names(self.projections is not None, self.instances is not None)) as tmp:
+                              names=output_names(self.projections is not None, self.instances is not None,
+                                                 self.directions is not None)) as tmp:
             self.volume.save(tmp / VOLUME_NAME, quicklook=False)
             if self.projections is not None:
                 self.projections.save(tmp / PROJECTIONS_NAME)
             self.labels.save(tmp / LABELS_NAME, quicklook=False)
             if self.instances is not None:
                 self.instances.save(tmp / INSTANCES_NAME, quicklook=False)
+            if self.directions is not None:
+                tifffile.imwrite(tmp / DIRECTIONS_NAME, self.directions,
+                                 metadata={"axes": "CZYX", "channels": "x, y, z components of the yarn direction"})
             write_slices(tmp / SLICES_NAME, self.volume.data, self.labels.data, names=self.metadata.get("labels"),
                          grid=self.volume.geometry)
             atomic_write_text(tmp / METADATA_NAME, json.dumps(self.metadata, indent=2) + "\n")
         return Path(directory)
 
 
-def output_names(projections: bool, instances: bool = False) -> tuple[str, ...]:
-    """The names a scan writes into its directory (with or without the projections and instances)."""
+def output_names(projections: bool, instances: bool = False, directions: bool = False) -> tuple[str, ...]:
+    """The names a scan writes into its directory (with or without the projections, instances, directions)."""
     kept = (PROJECTIONS_NAME, quicklook_path(Path(PROJECTIONS_NAME)).name) if projections else ()
-    return (VOLUME_NAME, LABELS_NAME, METADATA_NAME, SLICES_NAME, *kept, *((INSTANCES_NAME,) if instances else ()))
+    extra = (INSTANCES_NAME,) * instances + (DIRECTIONS_NAME,) * directions
+    return (VOLUME_NAME, LABELS_NAME, METADATA_NAME, SLICES_NAME, *kept, *extra)
 
 
 def check_scan_output(directory, *, overwrite: bool = False, projections: bool = False,
-                      instances: bool = False) -> Path:
+                      instances: bool = False, directions: bool = False) -> Path:
     """Refuse, before any work, an output directory that :meth:`ScanResult.save` would refuse."""
     return check_output_directory(directory, marker=METADATA_NAME, generator=GENERATOR, overwrite=overwrite,
-                                  names=output_names(projections, instances))
+                                  names=output_names(projections, instances, directions))
 
 
 def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False, allow_starved: bool = False,
@@ -151,10 +161,14 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False, a
                 volume = stream.result()
         with _timed(seconds, "labels"):
             labels = voxelize(scene, loaded.volume, context=renderer.gl)
-            instances, yarns = None, None
-            if options.instances:
-                instance_scene, yarns = yarn_instances(scene, loaded.weave.sample)
+            instances = yarns = directions = None
+            if options.instances or options.directions:
+                instance_scene, yarns, by_id = yarn_instances(scene, loaded.weave.sample)
                 instances = voxelize(instance_scene, loaded.volume, context=renderer.gl)
+                if options.directions:
+                    directions = direction_field(instances.data, loaded.volume, by_id, loaded.weave_placement())
+                if not options.instances:
+                    instances = yarns = None
         devices = {"gl_renderer": renderer.gl.renderer, "opencl_device": str(cl.info)}
     provenance = _joined(provenances)
     starved = starved_share(provenance["starved_covered_pixels"], provenance["covered_pixels"])
@@ -196,17 +210,17 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False, a
         # ru_maxrss is in KiB on Linux: the process's peak, which the scan's stages set.
         "peak_rss_mib": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
     }
-    return ScanResult(volume, labels, metadata, projections, instances)
+    return ScanResult(volume, labels, metadata, projections, instances, directions)
 
 
-def yarn_instances(scene, sample) -> tuple[Scene, dict[str, dict]]:
+def yarn_instances(scene, sample) -> tuple[Scene, dict[str, dict], dict[int, Yarn]]:
     """The woven ``scene``'s yarns, each labelled with its own id (1, 2, … in the scene's order; the
     matrix left out, so it is 0 with the background), with their priorities: the scene whose label
     volume is one id per yarn. And each id's yarn, as ``scan.json``'s ``instances`` lists it: name,
     family (weft or warp), kind (weft, binder or stuffer), its index among the sample's yarns
-    (:meth:`~xrayraster.weave.Sample.yarns`) and material."""
+    (:meth:`~xrayraster.weave.Sample.yarns`) and material; and each id's :class:`~xrayraster.weave.Yarn`."""
     yarns = {yarn.name: (index, yarn) for index, yarn in enumerate(sample.yarns())}
-    out, table = Scene(), {}
+    out, table, by_id = Scene(), {}, {}
     for obj in scene.objects:
         if obj.name not in yarns:
             continue  # the matrix
@@ -215,7 +229,8 @@ def yarn_instances(scene, sample) -> tuple[Scene, dict[str, dict]]:
         out.add(obj.mesh, obj.material, label=label, priority=obj.priority, name=obj.name)
         table[str(label)] = {"name": obj.name, "family": yarn.family, "kind": yarn.kind, "index": index,
                              "material": obj.material.name}
-    return out, table
+        by_id[label] = yarn
+    return out, table, by_id
 
 
 def _project_into(stream: FDKStream, renderer: Renderer, scanned, loaded: ScanFile, seconds: dict, progress,
