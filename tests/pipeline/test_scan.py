@@ -451,3 +451,32 @@ def test_direction_labels_follow_the_yarns(scanned, gl, cl, tmp_path):
     angles = np.degrees(np.arctan2(np.abs(d[2]), np.abs(d[1])))
     assert binder.sum() > 50
     assert np.all(np.abs(angles - slope) < 1.0), (slope, angles.min(), angles.max())
+
+
+def test_centre_lines_are_written_where_the_yarns_run(tmp_path):
+    """``"centrelines"`` through the command line: centrelines.json holds every yarn's centre line
+    inside the sample, in the scanner frame (the box centred on the axis): each weft a straight line
+    along x at its column's y and its layer's z, from one face of the box to the other; a binder
+    passes over and under the wefts, between the box's top and bottom."""
+    path = tmp_path / "lines.toml"
+    path.write_text(thick_text().replace("[scan]", "[scan]\nlabels = [\"classes\", \"centrelines\"]", 1))
+    out = tmp_path / "out"
+    assert cli.main(["scan", str(path), "-o", str(out), "--quiet"]) == 0
+    lines = json.loads((out / "centrelines.json").read_text())
+    loaded = load_scan_file(path)
+    sample, cell = loaded.weave.sample, loaded.weave.sample.cell
+    lo, hi = sample.yarn_box
+    centre = (sample.box[0] + sample.box[1]) / 2
+    assert lines["units"] == "mm" and {y["name"] for y in lines["yarns"]} == {y.name for y in sample.yarns()}
+    expected = {(round(wy - centre[1], 6), round(wz - centre[2], 6)) for wy in cell.weft_y for wz in cell.weft_layer_z}
+    for yarn in lines["yarns"]:
+        points = np.array(yarn["points"])
+        assert np.all(points >= lo - centre - 1e-9) and np.all(points <= hi - centre + 1e-9)
+        if yarn["kind"] == "weft":
+            assert np.ptp(points[:, 1]) < 1e-9 and np.ptp(points[:, 2]) < 1e-9
+            assert (round(points[0, 1], 6), round(points[0, 2], 6)) in expected
+            assert points[0, 0] < lo[0] - centre[0] + 0.2 and points[-1, 0] > hi[0] - centre[0] - 0.2
+        else:
+            z = points[:, 2] + centre[2]
+            assert z.min() == pytest.approx(cell.gap_z(0), abs=0.01) and z.max() == pytest.approx(
+                cell.gap_z(cell.weft_layers), abs=0.01)

@@ -21,7 +21,7 @@ DATASET_LAYOUTS = ("tiff", "nnunet", "hdf5")  # how a dataset build lays out its
 DATASET_SPLITS = ("train", "val", "test")  # the parts a dataset's samples are split into, in draw order
 DATASET_KEEP = ("projections", "meshes")  # what a dataset build keeps beside each sample's volumes
 LABEL_CLASSES = ("classes", "binder")  # a woven scan's class volume: binders in warp (3), or a class of their own (4)
-LABEL_EXTRAS = ("instances", "directions")  # beside a woven scan's classes: one id per yarn; its direction
+LABEL_EXTRAS = ("instances", "directions", "centrelines")  # beside a woven scan's classes (docs/labels.md)
 
 
 def is_switch(value) -> bool:

@@ -73,7 +73,8 @@ class ScanOptions:
     :func:`xrayraster.fdk` takes them; ``labels``, the label volumes of a woven sample: first its
     classes, ``"classes"`` (matrix 1, weft 2, warp 3) or ``"binder"`` (the binders a class of their
     own, 4; the stuffers stay warp), then, optionally, ``"instances"`` (one id per yarn, uint16,
-    beside them) and ``"directions"`` (each yarn voxel's yarn direction) (docs/labels.md)."""
+    beside them), ``"directions"`` (each yarn voxel's yarn direction) and ``"centrelines"`` (the
+    yarns' centre lines as polylines) (docs/labels.md)."""
 
     seed: int = 0
     noise: bool = True
@@ -94,6 +95,10 @@ class ScanOptions:
     @property
     def directions(self) -> bool:
         return "directions" in self.labels
+
+    @property
+    def centrelines(self) -> bool:
+        return "centrelines" in self.labels
 
     @classmethod
     def from_dict(cls, d: dict, where: str) -> "ScanOptions":

@@ -37,6 +37,7 @@ from ..recon.fdk_weights import footprint_radius
 from ..recon.opencl import CLContext
 from ..scene.scene import Scene
 from ..simulate.renderer import Renderer
+from ..weave.centrelines import centreline_table
 from ..weave.directions import direction_field
 from ..weave.yarn import LABELS as WEAVE_LABELS
 from ..weave.yarn import Yarn
@@ -47,6 +48,9 @@ __all__ = ["ScanResult", "check_scan_output", "scan"]
 GENERATOR = "xrayraster scan"
 VOLUME_NAME, LABELS_NAME, METADATA_NAME, SLICES_NAME = "volume.tif", "labels.tif", "scan.json", "slices.png"
 PROJECTIONS_NAME, INSTANCES_NAME, DIRECTIONS_NAME = "projections.tif", "instances.tif", "directions.tif"
+CENTRELINES_NAME = "centrelines.json"
+#: Spacing of the points of the centre lines a scan writes, in voxels of its grid.
+CENTRELINE_STEP_VOXELS = 0.5
 _LIBRARIES = ("numpy", "moderngl", "pyopencl", "manifold3d", "xraylib", "spekpy")
 # Views rendered, then filtered and backprojected, per batch: 32 MiB of line integrals at 512²,
 # and (measured) as fast in the backprojection as the FDK's largest batches. docs/scan.md
@@ -66,7 +70,8 @@ class ScanResult:
     per-stage wall times (s) and the peak resident memory (MiB), as ``scan.json`` stores them;
     ``instances``, one id per yarn on the same grid where the scan file asks (``metadata["instances"]``
     names each id's yarn), and ``directions``, each yarn voxel's yarn direction, ``(3, z, y, x)``
-    float16 (x, y, z) components (:func:`~xrayraster.weave.directions.direction_field`)."""
+    float16 (x, y, z) components (:func:`~xrayraster.weave.directions.direction_field`), and
+    ``centrelines``, the yarns' centre lines (:func:`~xrayraster.weave.centrelines.centreline_table`)."""
 
     volume: Volume
     labels: LabelVolume
@@ -74,6 +79,7 @@ class ScanResult:
     projections: Projections | None = None  # kept only when asked (scan(..., keep_projections=True))
     instances: LabelVolume | None = None
     directions: np.ndarray | None = None
+    centrelines: dict | None = None
 
     def save(self, directory, *, overwrite: bool = False) -> Path:
         """Write ``volume.tif`` (float32, cm⁻¹), ``labels.tif``, ``scan.json`` and ``slices.png`` into
@@ -85,7 +91,7 @@ class ScanResult:
         files and keeps every other entry. A link is followed. Returns ``directory``."""
         with atomic_directory(directory, marker=METADATA_NAME, generator=GENERATOR, overwrite=overwrite,
                               names=output_names(self.projections is not None, self.instances is not None,
-                                                 self.directions is not None)) as tmp:
+                                                 self.directions is not None, self.centrelines is not None)) as tmp:
             self.volume.save(tmp / VOLUME_NAME, quicklook=False)
             if self.projections is not None:
                 self.projections.save(tmp / PROJECTIONS_NAME)
@@ -95,24 +101,28 @@ class ScanResult:
             if self.directions is not None:
                 tifffile.imwrite(tmp / DIRECTIONS_NAME, self.directions,
                                  metadata={"axes": "CZYX", "channels": "x, y, z components of the yarn direction"})
+            if self.centrelines is not None:
+                atomic_write_text(tmp / CENTRELINES_NAME, json.dumps(self.centrelines) + "\n")
             write_slices(tmp / SLICES_NAME, self.volume.data, self.labels.data, names=self.metadata.get("labels"),
                          grid=self.volume.geometry)
             atomic_write_text(tmp / METADATA_NAME, json.dumps(self.metadata, indent=2) + "\n")
         return Path(directory)
 
 
-def output_names(projections: bool, instances: bool = False, directions: bool = False) -> tuple[str, ...]:
-    """The names a scan writes into its directory (with or without the projections, instances, directions)."""
+def output_names(projections: bool, instances: bool = False, directions: bool = False,
+                 centrelines: bool = False) -> tuple[str, ...]:
+    """The names a scan writes into its directory (with or without the projections and extra labels)."""
     kept = (PROJECTIONS_NAME, quicklook_path(Path(PROJECTIONS_NAME)).name) if projections else ()
-    extra = (INSTANCES_NAME,) * instances + (DIRECTIONS_NAME,) * directions
+    extra = (INSTANCES_NAME,) * instances + (DIRECTIONS_NAME,) * directions + (CENTRELINES_NAME,) * centrelines
     return (VOLUME_NAME, LABELS_NAME, METADATA_NAME, SLICES_NAME, *kept, *extra)
 
 
-def check_scan_output(directory, *, overwrite: bool = False, projections: bool = False,
-                      instances: bool = False, directions: bool = False) -> Path:
-    """Refuse, before any work, an output directory that :meth:`ScanResult.save` would refuse."""
+def check_scan_output(directory, *, overwrite: bool = False, projections: bool = False, options=None) -> Path:
+    """Refuse, before any work, an output directory that :meth:`ScanResult.save` would refuse
+    (``options``: the scan's :class:`~xrayraster.pipeline.ScanOptions`, whose extra labels it writes)."""
+    extras = (options.instances, options.directions, options.centrelines) if options is not None else ()
     return check_output_directory(directory, marker=METADATA_NAME, generator=GENERATOR, overwrite=overwrite,
-                                  names=output_names(projections, instances, directions))
+                                  names=output_names(projections, *extras))
 
 
 def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False, allow_starved: bool = False,
@@ -169,6 +179,10 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False, a
                     directions = direction_field(instances.data, loaded.volume, by_id, loaded.weave_placement())
                 if not options.instances:
                     instances = yarns = None
+            centrelines = None
+            if options.centrelines:
+                step = CENTRELINE_STEP_VOXELS * min(loaded.volume.voxel_size)
+                centrelines = centreline_table(loaded.weave.sample, loaded.weave_placement(), step)
         devices = {"gl_renderer": renderer.gl.renderer, "opencl_device": str(cl.info)}
     provenance = _joined(provenances)
     starved = starved_share(provenance["starved_covered_pixels"], provenance["covered_pixels"])
@@ -210,7 +224,7 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False, a
         # ru_maxrss is in KiB on Linux: the process's peak, which the scan's stages set.
         "peak_rss_mib": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
     }
-    return ScanResult(volume, labels, metadata, projections, instances, directions)
+    return ScanResult(volume, labels, metadata, projections, instances, directions, centrelines)
 
 
 def yarn_instances(scene, sample) -> tuple[Scene, dict[str, dict], dict[int, Yarn]]:

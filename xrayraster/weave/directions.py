@@ -1,7 +1,7 @@
 """The yarn direction at every yarn voxel: the unit tangent of the yarn's centre line where it
 passes nearest the voxel's centre, a label a network can learn fibre orientation from.
 
-Each yarn's centre line is its path's spline (:class:`~xrayraster.weave.sweep.CubicSpline3`, the
+Each yarn's centre line is its path's spline (:func:`~xrayraster.weave.centrelines.centreline`, the
 one its tube is swept along), evaluated every :data:`STEP_VOXELS` of a voxel and placed as the
 sample is (``transform``); each voxel of the yarn (from the instance label volume, so the yarn that
 owns the voxel under the priorities) takes the tangent at the nearest of those points (a k-d tree).
@@ -16,7 +16,7 @@ from scipy.spatial import cKDTree
 
 from ..core.transform import Transform
 from ..core.volume import VolumeGeometry
-from .sweep import CubicSpline3
+from .centrelines import centreline
 from .yarn import Yarn
 
 __all__ = ["STEP_VOXELS", "direction_field"]
@@ -36,7 +36,6 @@ def direction_field(instances: np.ndarray, grid: VolumeGeometry, yarns: dict[int
     order = np.argsort(flat, kind="stable")
     ends = np.cumsum(np.bincount(flat, minlength=max(yarns, default=0) + 1))
     axes = [grid.axis_centres(a) for a in range(3)]  # z, y, x
-    linear = transform.array[:3, :3]
     step = STEP_VOXELS * min(grid.voxel_size)
     for label, yarn in yarns.items():
         if label >= len(ends):
@@ -44,11 +43,7 @@ def direction_field(instances: np.ndarray, grid: VolumeGeometry, yarns: dict[int
         voxels = order[ends[label - 1]:ends[label]]
         if voxels.size == 0:
             continue
-        spline = CubicSpline3(yarn.nodes, yarn.end_tangents)
-        t = np.linspace(0.0, spline.length_parameter, max(2, int(np.ceil(spline.length_parameter / step)) + 1))
-        points = transform.apply(spline(t))
-        tangents = spline(t, derivative=1) @ linear.T
-        tangents /= np.linalg.norm(tangents, axis=1, keepdims=True)
+        points, tangents = centreline(yarn, transform, step)
         k, j, i = np.unravel_index(voxels, instances.shape)
         centres = np.column_stack([axes[2][i], axes[1][j], axes[0][k]])  # x, y, z
         nearest = cKDTree(points).query(centres)[1]
