@@ -480,3 +480,10 @@ def test_centre_lines_are_written_where_the_yarns_run(tmp_path):
             z = points[:, 2] + centre[2]
             assert z.min() == pytest.approx(cell.gap_z(0), abs=0.01) and z.max() == pytest.approx(
                 cell.gap_z(cell.weft_layers), abs=0.01)
+
+
+def test_every_extra_label_has_its_file():
+    from xrayraster.core.choices import LABEL_EXTRAS
+    from xrayraster.pipeline.scan import EXTRA_LABEL_NAMES
+
+    assert tuple(EXTRA_LABEL_NAMES) == LABEL_EXTRAS

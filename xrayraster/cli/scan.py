@@ -32,7 +32,7 @@ def add_parser(subparsers) -> None:
 def run(args) -> int:
     loaded = load_scan_file(args.scan)
     check_scan_output(args.out, overwrite=args.force, projections=args.save_projections,
-                      options=loaded.options)
+                      extra_labels=loaded.options.labels[1:])
     result = scan(loaded, progress=not args.quiet, keep_projections=args.save_projections,
                   allow_starved=args.allow_starved)
     result.save(args.out, overwrite=args.force)

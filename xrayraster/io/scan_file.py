@@ -84,22 +84,6 @@ class ScanOptions:
     truncation_width: float = DEFAULT_WIDTH
     labels: tuple[str, ...] = ("classes",)
 
-    @property
-    def binder_label(self) -> bool:
-        return "binder" in self.labels
-
-    @property
-    def instances(self) -> bool:
-        return "instances" in self.labels
-
-    @property
-    def directions(self) -> bool:
-        return "directions" in self.labels
-
-    @property
-    def centrelines(self) -> bool:
-        return "centrelines" in self.labels
-
     @classmethod
     def from_dict(cls, d: dict, where: str) -> "ScanOptions":
         fields.only(d, {f.name for f in dataclasses.fields(cls)}, where)
@@ -167,7 +151,7 @@ class ScanFile:
         if self.weave is None:
             return self.scene
         return self.weave.sample.scene(self.weave.materials, transform=self.weave_placement(), progress=progress,
-                                       binder_label=self.options.binder_label)
+                                       binder_label="binder" in self.options.labels)
 
     def weave_placement(self) -> Transform:
         """Where the weave's frame lands in the scanner's: its box centred on the axis, posed."""

@@ -47,8 +47,9 @@ __all__ = ["ScanResult", "check_scan_output", "scan"]
 
 GENERATOR = "xrayraster scan"
 VOLUME_NAME, LABELS_NAME, METADATA_NAME, SLICES_NAME = "volume.tif", "labels.tif", "scan.json", "slices.png"
-PROJECTIONS_NAME, INSTANCES_NAME, DIRECTIONS_NAME = "projections.tif", "instances.tif", "directions.tif"
-CENTRELINES_NAME = "centrelines.json"
+PROJECTIONS_NAME = "projections.tif"
+#: The file of each extra label a scan file may ask for (:data:`~xrayraster.core.choices.LABEL_EXTRAS`).
+EXTRA_LABEL_NAMES = {"instances": "instances.tif", "directions": "directions.tif", "centrelines": "centrelines.json"}
 #: Spacing of the points of the centre lines a scan writes, in voxels of its grid.
 CENTRELINE_STEP_VOXELS = 0.5
 _LIBRARIES = ("numpy", "moderngl", "pyopencl", "manifold3d", "xraylib", "spekpy")
@@ -90,39 +91,43 @@ class ScanResult:
         else :class:`~xrayraster.ConfigError`; ``overwrite=True`` then replaces the earlier scan's
         files and keeps every other entry. A link is followed. Returns ``directory``."""
         with atomic_directory(directory, marker=METADATA_NAME, generator=GENERATOR, overwrite=overwrite,
-                              names=output_names(self.projections is not None, self.instances is not None,
-                                                 self.directions is not None, self.centrelines is not None)) as tmp:
+                              names=output_names(self.projections is not None, self.extra_labels)) as tmp:
             self.volume.save(tmp / VOLUME_NAME, quicklook=False)
             if self.projections is not None:
                 self.projections.save(tmp / PROJECTIONS_NAME)
             self.labels.save(tmp / LABELS_NAME, quicklook=False)
+            names = EXTRA_LABEL_NAMES
             if self.instances is not None:
-                self.instances.save(tmp / INSTANCES_NAME, quicklook=False)
+                self.instances.save(tmp / names["instances"], quicklook=False)
             if self.directions is not None:
-                tifffile.imwrite(tmp / DIRECTIONS_NAME, self.directions,
+                tifffile.imwrite(tmp / names["directions"], self.directions,
                                  metadata={"axes": "CZYX", "channels": "x, y, z components of the yarn direction"})
             if self.centrelines is not None:
-                atomic_write_text(tmp / CENTRELINES_NAME, json.dumps(self.centrelines) + "\n")
+                atomic_write_text(tmp / names["centrelines"], json.dumps(self.centrelines) + "\n")
             write_slices(tmp / SLICES_NAME, self.volume.data, self.labels.data, names=self.metadata.get("labels"),
                          grid=self.volume.geometry)
             atomic_write_text(tmp / METADATA_NAME, json.dumps(self.metadata, indent=2) + "\n")
         return Path(directory)
 
+    @property
+    def extra_labels(self) -> tuple[str, ...]:
+        """The extra labels the result holds (of :data:`EXTRA_LABEL_NAMES`)."""
+        return tuple(name for name in EXTRA_LABEL_NAMES if getattr(self, name) is not None)
 
-def output_names(projections: bool, instances: bool = False, directions: bool = False,
-                 centrelines: bool = False) -> tuple[str, ...]:
-    """The names a scan writes into its directory (with or without the projections and extra labels)."""
+
+def output_names(projections: bool, extra_labels=()) -> tuple[str, ...]:
+    """The names a scan writes into its directory (with or without the projections, and the files of
+    ``extra_labels``)."""
     kept = (PROJECTIONS_NAME, quicklook_path(Path(PROJECTIONS_NAME)).name) if projections else ()
-    extra = (INSTANCES_NAME,) * instances + (DIRECTIONS_NAME,) * directions + (CENTRELINES_NAME,) * centrelines
+    extra = tuple(EXTRA_LABEL_NAMES[name] for name in extra_labels)
     return (VOLUME_NAME, LABELS_NAME, METADATA_NAME, SLICES_NAME, *kept, *extra)
 
 
-def check_scan_output(directory, *, overwrite: bool = False, projections: bool = False, options=None) -> Path:
+def check_scan_output(directory, *, overwrite: bool = False, projections: bool = False, extra_labels=()) -> Path:
     """Refuse, before any work, an output directory that :meth:`ScanResult.save` would refuse
-    (``options``: the scan's :class:`~xrayraster.pipeline.ScanOptions`, whose extra labels it writes)."""
-    extras = (options.instances, options.directions, options.centrelines) if options is not None else ()
+    (``extra_labels``: those the scan file asks for, ``ScanOptions.labels[1:]``)."""
     return check_output_directory(directory, marker=METADATA_NAME, generator=GENERATOR, overwrite=overwrite,
-                                  names=output_names(projections, *extras))
+                                  names=output_names(projections, extra_labels))
 
 
 def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False, allow_starved: bool = False,
@@ -171,18 +176,7 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False, a
                 volume = stream.result()
         with _timed(seconds, "labels"):
             labels = voxelize(scene, loaded.volume, context=renderer.gl)
-            instances = yarns = directions = None
-            if options.instances or options.directions:
-                instance_scene, yarns, by_id = yarn_instances(scene, loaded.weave.sample)
-                instances = voxelize(instance_scene, loaded.volume, context=renderer.gl)
-                if options.directions:
-                    directions = direction_field(instances.data, loaded.volume, by_id, loaded.weave_placement())
-                if not options.instances:
-                    instances = yarns = None
-            centrelines = None
-            if options.centrelines:
-                step = CENTRELINE_STEP_VOXELS * min(loaded.volume.voxel_size)
-                centrelines = centreline_table(loaded.weave.sample, loaded.weave_placement(), step)
+            instances, yarns, directions, centrelines = _extra_labels(loaded, scene, renderer.gl)
         devices = {"gl_renderer": renderer.gl.renderer, "opencl_device": str(cl.info)}
     provenance = _joined(provenances)
     starved = starved_share(provenance["starved_covered_pixels"], provenance["covered_pixels"])
@@ -225,6 +219,25 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False, a
         "peak_rss_mib": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
     }
     return ScanResult(volume, labels, metadata, projections, instances, directions, centrelines)
+
+
+def _extra_labels(loaded: ScanFile, scene, gl):
+    """(instances, their yarns' table, directions, centre lines) of a woven scan, each None unless its
+    scan file asks for it (``[scan] labels``); the directions are read off an instance volume, made
+    for them when the instances themselves are not asked for."""
+    wanted = loaded.options.labels[1:]
+    instances = yarns = directions = centrelines = None
+    if "instances" in wanted or "directions" in wanted:
+        instance_scene, yarns, by_id = yarn_instances(scene, loaded.weave.sample)
+        instances = voxelize(instance_scene, loaded.volume, context=gl)
+        if "directions" in wanted:
+            directions = direction_field(instances.data, loaded.volume, by_id, loaded.weave_placement())
+        if "instances" not in wanted:
+            instances = yarns = None
+    if "centrelines" in wanted:
+        step = CENTRELINE_STEP_VOXELS * min(loaded.volume.voxel_size)
+        centrelines = centreline_table(loaded.weave.sample, loaded.weave_placement(), step)
+    return instances, yarns, directions, centrelines
 
 
 def yarn_instances(scene, sample) -> tuple[Scene, dict[str, dict], dict[int, Yarn]]:
