@@ -72,7 +72,7 @@ class ScanOptions:
     sample's, so this applies to ``xrayraster reconstruct`` without ``--object-radius``), as
     :func:`xrayraster.fdk` takes them; ``labels``, the label volumes of a woven sample: first its
     classes, ``"classes"`` (matrix 1, weft 2, warp 3) or ``"binder"`` (the binders a class of their
-    own, 4; the stuffers stay warp), then, optionally, ``"instances"`` (one id per yarn, uint16,
+    own, 4; the stuffers stay warp), then, optionally, ``"instances"`` (one id per yarn,
     beside them), ``"directions"`` (each yarn voxel's yarn direction) and ``"centrelines"`` (the
     yarns' centre lines as polylines) (docs/labels.md)."""
 
@@ -109,8 +109,8 @@ class ScanOptions:
         if "labels" in d:
             labels = d["labels"]
             if not isinstance(labels, list) or not labels:
-                raise ConfigError(f"{where}: labels must be a list of label volumes, the classes first: "
-                                  f"[\"classes\"], [\"binder\"] or with \"instances\" after them, got {labels!r}")
+                raise ConfigError(f"{where}: labels must be a list of label volumes, the classes first "
+                                  f"(\"classes\" or \"binder\"), then any of {', '.join(LABEL_EXTRAS)}, got {labels!r}")
             chosen = [fields.choice(labels[0], "labels[0]", where, LABEL_CLASSES)]
             chosen += [fields.choice(x, f"labels[{i}]", where, LABEL_EXTRAS) for i, x in enumerate(labels[1:], 1)]
             if len(set(chosen)) != len(chosen):

@@ -38,8 +38,6 @@ def direction_field(instances: np.ndarray, grid: VolumeGeometry, yarns: dict[int
     axes = [grid.axis_centres(a) for a in range(3)]  # z, y, x
     step = STEP_VOXELS * min(grid.voxel_size)
     for label, yarn in yarns.items():
-        if label >= len(ends):
-            continue
         voxels = order[ends[label - 1]:ends[label]]
         if voxels.size == 0:
             continue

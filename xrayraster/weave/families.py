@@ -26,6 +26,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from ..core.errors import WeaveError
 
 __all__ = ["FAMILIES", "FAMILY_NAMES", "Family"]
@@ -88,6 +90,36 @@ class Family:
         shift = (i % p) * offset if self.name == "offset_angle_interlock" else 0
         period = self.period(n, step)
         return tuple(_zigzag(((j - shift) % period) // step, n) for j in range(w))
+
+    def node_heights(self, path, columns, offsets, spacing: float, gap_z) -> np.ndarray:
+        """``(len(columns), len(offsets))`` z (mm) of a binder's nodes at ``offsets`` (mm) from the
+        centres of weft ``columns`` (``spacing`` mm apart; indices over all cells) for its ``path``
+        (gaps, ``gap_z(gap)`` their heights): flat at each column's gap, except where an angle
+        interlock climbs or falls through a column (its gaps before and after one below and one
+        above, or the reverse): there its nodes lie on the line from the end of its last turn's
+        plateau to the start of its next one, so it runs flat over the wefts it turns on and straight
+        between them."""
+        w = len(path)
+        heights = np.repeat(np.array([gap_z(path[j % w]) for j in columns])[:, None], len(offsets), axis=1)
+        if not self.name.endswith("angle_interlock"):
+            return heights
+
+        def climbs(j):  # through column j, one gap a column
+            before, here, after = (path[(j + d) % w] for d in (-1, 0, 1))
+            return (before - here) * (here - after) > 0 and abs(before - after) == 2
+
+        for k, j in enumerate(columns):
+            if not climbs(j):
+                continue
+            start, end = j - 1, j + 1
+            while climbs(start):
+                start -= 1
+            while climbs(end):
+                end += 1
+            y0, y1 = (start + 0.5) * spacing + offsets[-1], (end + 0.5) * spacing + offsets[0]  # plateau edges
+            z0, z1 = gap_z(path[start % w]), gap_z(path[end % w])
+            heights[k] = z0 + ((j + 0.5) * spacing + offsets - y0) * (z1 - z0) / (y1 - y0)
+        return heights
 
     def check_path(self, i: int, path: tuple[int, ...], n: int) -> None:
         """Refuse a given path the family cannot weave (an orthogonal binder only runs over the top

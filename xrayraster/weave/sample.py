@@ -198,33 +198,12 @@ class Sample:
                 section_outline(c.warp_section, c.warp_width, c.warp_height, k))
 
     def _binder_nodes(self, x: float, path, columns: np.ndarray, z0: float) -> np.ndarray:
-        """A binder's plateau nodes (see PLATEAU) at ``x`` over weft ``columns`` (counted over all cells).
-
-        An angle-interlock binder climbing or falling through a column (its gaps before and after it
-        one below and one above, or the reverse) runs straight there instead: its nodes lie on the
-        line from the end of its last turn's plateau to the start of its next one, so it runs flat
-        over the wefts it turns on and straight between them (docs/weave.md)."""
+        """A binder's plateau nodes (see PLATEAU) at ``x`` over weft ``columns`` (counted over all cells),
+        at the heights its family gives them (:meth:`~xrayraster.weave.families.Family.node_heights`)."""
         c = self.cell
-        w = c.weft_per_layer
         offsets = np.asarray(self.plateau) * (c.weft_width / 2)
         ys = ((columns + 0.5) * c.weft_spacing)[:, None] + offsets[None, :]
-        zs = np.repeat(np.array([c.gap_z(path[j % w]) for j in columns])[:, None], len(offsets), axis=1)
-        if c.family.endswith("angle_interlock"):
-            def climbs(j):  # through column j, one gap a column
-                before, here, after = (path[(j + d) % w] for d in (-1, 0, 1))
-                return (before - here) * (here - after) > 0 and abs(before - after) == 2
-
-            for k, j in enumerate(columns):
-                if climbs(j):
-                    start, end = j - 1, j + 1
-                    while climbs(start):
-                        start -= 1
-                    while climbs(end):
-                        end += 1
-                    y0 = (start + 0.5) * c.weft_spacing + offsets[-1]  # the turns' plateau edges
-                    y1 = (end + 0.5) * c.weft_spacing + offsets[0]
-                    z0_, z1_ = c.gap_z(path[start % w]), c.gap_z(path[end % w])
-                    zs[k] = z0_ + (ys[k] - y0) * (z1_ - z0_) / (y1 - y0)
+        zs = FAMILIES[c.family].node_heights(path, columns, offsets, c.weft_spacing, c.gap_z)
         return np.column_stack([np.full(ys.size, x), ys.ravel(), zs.ravel() + z0])
 
     def _regular_yarns(self) -> list[Yarn]:
