@@ -69,7 +69,7 @@ void grown_primitives(vec2 p[3], float margin, out vec2 corners[6]) {
 // A triangle thinner than the margin, whose orientation rounding may flip, lies within the
 // margin of either orientation's half-planes, and a degenerate edge (a = 0, c = 0) imposes
 // nothing: the region stays a superset for slivers and needles.
-struct RowSpans { vec3 slope; vec3 offset; vec3 lower; vec3 upper; vec3 flat_a; vec3 flat_c; };
+struct RowSpans { vec3 slope; vec3 offset; bvec3 lower; bvec3 upper; vec3 flat_a; vec3 flat_c; };
 
 RowSpans row_spans(vec2 p[3], float margin) {
     vec2 d0 = p[1] - p[0], d2 = p[0] - p[2];
@@ -82,8 +82,8 @@ RowSpans row_spans(vec2 p[3], float margin) {
         float across = a.x == 0.0 ? 0.0 : -1.0 / a.x;
         s.slope[i] = a.y * across;
         s.offset[i] = c * across;
-        s.lower[i] = float(a.x > 0.0);
-        s.upper[i] = float(a.x < 0.0);
+        s.lower[i] = a.x > 0.0;
+        s.upper[i] = a.x < 0.0;
         s.flat_a[i] = a.x == 0.0 ? a.y : 0.0;
         s.flat_c[i] = a.x == 0.0 ? c : 0.0;
     }
@@ -94,6 +94,8 @@ RowSpans row_spans(vec2 p[3], float margin) {
 // `y_centre` lie inside all three half-planes.
 ivec2 row_span(RowSpans s, float y_centre, ivec2 columns) {
     vec3 bound = s.slope * y_centre + s.offset;
+    // mix by a bvec selects; a float weight may be computed x + w (y - x), which at 3e38 loses the
+    // bound whole (an NVIDIA H200 lost or misplaced crossings so at 256² and 512²).
     vec3 low = mix(vec3(-3.0e38), bound, s.lower), high = mix(vec3(3.0e38), bound, s.upper);
     if (any(lessThan(s.flat_a * y_centre + s.flat_c, vec3(0.0)))) return ivec2(1, 0);
     float lo = max(float(columns.x) + 0.5, max(low.x, max(low.y, low.z)));

@@ -145,21 +145,3 @@ def test_a_full_candidate_buffer_grows_and_the_view_runs_again(gl, overlap):
         assert overlap == "sum" or nodes() == crossings
     np.testing.assert_array_equal(got, want)
     assert want.max() > 5.0  # the spheres, slivers and boxes were drawn
-
-
-def test_the_split_defaults_to_the_compute_passes_on_cpu_rasterisers_only(gl):
-    """64 pixel centres on Mesa's llvmpipe (measured faster there), 0 (all rasterised) on any GPU
-    driver: on an NVIDIA H200 the compute passes lost crossings at 256² and 512²."""
-    from types import SimpleNamespace
-
-    from xrayraster.gl.context import GLContext
-    from xrayraster.gl.crossings import SMALL_TRIANGLE_PIXELS, default_small_triangle_pixels
-
-    def named(renderer):  # a context whose driver gives this GL_RENDERER
-        info = SimpleNamespace(ctx=SimpleNamespace(info={"GL_RENDERER": renderer}))
-        return SimpleNamespace(software=GLContext.software.fget(info))
-
-    assert default_small_triangle_pixels(named("llvmpipe (LLVM 15.0.6, 256 bits)")) == SMALL_TRIANGLE_PIXELS
-    assert default_small_triangle_pixels(named("NVIDIA H200/PCIe/SSE2")) == 0
-    with xr.Renderer(xr.ConeBeamGeometry(100.0, 200.0, (16, 16), 0.5, [0.0]), context=gl) as r:
-        assert r.small_triangle_pixels == default_small_triangle_pixels(gl)

@@ -12,6 +12,7 @@ import importlib
 import json
 import math
 import re
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -182,6 +183,27 @@ def test_the_example_scans_in_python(gl, cl):
     assert result.volume.unit == "1/cm" and result.volume.data.shape == (24, 64, 64)
     assert result.labels.geometry == result.volume.geometry
     print("example stage times (s):", result.metadata["seconds"])
+
+
+def test_beside_a_gpu_the_stages_overlap_and_keep_every_byte(gl, cl, monkeypatch):
+    """As beside a GL on a GPU: several views' physics at once and each batch's FDK on a thread while
+    the next renders; the volume and labels are the bytes of the scan in turn."""
+    import xrayraster.simulate.renderer as renderer_module
+
+    in_turn = xr.scan(EXAMPLE, gl=gl, cl=cl)
+    fdk_threads = set()
+    add = xr.FDKStream.add
+
+    def watched_add(self, *args, **kwargs):
+        fdk_threads.add(threading.current_thread().name)
+        return add(self, *args, **kwargs)
+
+    monkeypatch.setattr(renderer_module, "physics_workers", lambda software_gl, threads: 3)
+    monkeypatch.setattr(xr.FDKStream, "add", watched_add)
+    overlapped = xr.scan(EXAMPLE, gl=gl, cl=cl)
+    assert fdk_threads and all(name.startswith("xrayraster-fdk") for name in fdk_threads)
+    np.testing.assert_array_equal(overlapped.volume.data, in_turn.volume.data)
+    np.testing.assert_array_equal(overlapped.labels.data, in_turn.labels.data)
 
 
 def test_refuses_a_foreign_directory(tmp_path, capsys):

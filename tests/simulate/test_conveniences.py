@@ -76,18 +76,20 @@ def test_project_all_defaults_to_every_view_and_equals_project(renderer, scene):
     json.dumps(p.metadata())  # every provenance value is JSON-ready
 
 
-def test_project_all_overlaps_the_physics_and_keeps_every_byte(renderer, scene, monkeypatch):
-    """The physics of view k runs on a thread while the GL renders view k + 1: with the scan's
-    shared patterns (flats, gain map, a focal spot) and views out of order, every view is still
-    the bytes project() gives alone, and the physics did run off the main thread; beside a GL on
-    the CPU (llvmpipe), at the lowest priority as the kernel reports it, the caller's unchanged."""
+@pytest.mark.parametrize("workers", [1, 3])
+def test_project_all_overlaps_the_physics_and_keeps_every_byte(renderer, scene, monkeypatch, workers):
+    """The physics of view k runs on a thread (``workers`` of them, as beside a GPU) while the GL
+    renders view k + 1: with the scan's shared patterns (flats, gain map, a focal spot) and views
+    out of order, every view is still the bytes project() gives alone, and the physics did run off
+    the main thread; beside a GL on the CPU (llvmpipe), at the lowest priority as the kernel reports
+    it, the caller's unchanged."""
     realism = xr.Realism(focal_spot_mm=0.3, flat_fields=4, gain_variation=0.01)
     threads = set()
     physics_of = renderer._physics_of
     niceness = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
 
-    def watched(*args):
-        run = physics_of(*args)
+    def watched(*args, **kwargs):
+        run = physics_of(*args, **kwargs)
 
         def physics(view, lengths):
             threads.add((threading.current_thread().name, os.getpriority(os.PRIO_PROCESS, threading.get_native_id())))
@@ -96,12 +98,14 @@ def test_project_all_overlaps_the_physics_and_keeps_every_byte(renderer, scene, 
         return physics
 
     monkeypatch.setattr(renderer, "_physics_of", watched)
+    monkeypatch.setattr(renderer, "physics_workers", workers)
     views = [3, 0, 4, 1]
     p = renderer.project_all(scene, MONO, views, noise=True, seed=11, realism=realism, progress=False)
+    names = {name for name, _ in threads}
+    assert names and all(name.startswith("xrayraster-physics") for name in names) and len(names) <= workers
     for k, v in enumerate(views):
         np.testing.assert_array_equal(p.data[k], renderer.project(scene, MONO, v, noise=True, seed=11,
                                                                   realism=realism).image)
-    assert any(name.startswith("xrayraster-physics") for name, _ in threads)
     if renderer.gl.software and sys.platform.startswith("linux"):
         assert {nice for name, nice in threads if name.startswith("xrayraster-physics")} == {PHYSICS_NICENESS}
     assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) == niceness

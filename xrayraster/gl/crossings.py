@@ -52,16 +52,9 @@ MIN_CROSSINGS = 16  # list room per pixel a resolve pass starts with; widened on
 NODE_STRIPE_BITS = 8  # the node pool's 256 stripes, each with its own counter (shaders/crossing.glsl)
 CANDIDATES_HEADER = 16  # bytes before the candidate entries: their count, pass 1b's work groups
 ENTRY_BYTES = 16  # a candidate entry: a triangle and up to two of its pixels (shaders/candidates.glsl)
-SMALL_TRIANGLE_PIXELS = 64  # measured: 32-128 equally fast on llvmpipe at 256²-2048²
-
-
-def default_small_triangle_pixels(gl: GLContext) -> int:
-    """Pass 1's limit by driver: :data:`SMALL_TRIANGLE_PIXELS` on Mesa's CPU rasterisers, where the
-    compute passes were measured faster for small triangles; 0 (every triangle rasterised) on GPUs.
-    On an NVIDIA H200 (driver 580.159.04, 2026-11-27) the compute passes 1 and 1b lost or misplaced
-    crossings at 256² and 512² (81 k of 262 k pixels of twin_small off by up to 36 mm, against
-    2e-4 mm rasterised), a bug not yet found; the rasteriser is the GPU's fast path anyway."""
-    return SMALL_TRIANGLE_PIXELS if gl.software else 0
+# Measured: 32-128 equally fast on llvmpipe at 256²-2048²; on an NVIDIA H200, a twin view at 512² took
+# 6.8-7.7 ms with 64 against 12.5-18.8 with every triangle rasterised (0), the same bytes.
+SMALL_TRIANGLE_PIXELS = 64
 
 
 class CrossingEngine:
@@ -71,11 +64,10 @@ class CrossingEngine:
     buffers between views; call :meth:`release` when done. Use it inside ``gl.current()``.
     """
 
-    def __init__(self, geometry: VectorGeometry, gl: GLContext, small_triangle_pixels: int | None = None):
+    def __init__(self, geometry: VectorGeometry, gl: GLContext, small_triangle_pixels: int = SMALL_TRIANGLE_PIXELS):
         self.geometry = geometry
         self.gl = gl
-        self.small_triangle_pixels = (default_small_triangle_pixels(gl) if small_triangle_pixels is None
-                                      else int(small_triangle_pixels))
+        self.small_triangle_pixels = int(small_triangle_pixels)
         # Vertices snap to 2^-bits px; 1/64 px is 8x that on the usual 8 sub-pixel bits.
         self._snap_margin = max(1.0 / 64.0, 4.0 * 2.0 ** -int(gl.ctx.info.get("GL_SUBPIXEL_BITS", 4)))
         self._max_groups = int(gl.ctx.info["GL_MAX_COMPUTE_WORK_GROUP_COUNT"][0])

@@ -35,7 +35,7 @@ from ..core.geometry import VectorGeometry, as_vector_geometry
 from ..core.memory import available_memory
 from ..scene.scene import Scene
 from .context import GLContext
-from .crossings import MIN_CROSSINGS, NODE_BYTES, CrossingEngine, default_small_triangle_pixels
+from .crossings import MIN_CROSSINGS, NODE_BYTES, SMALL_TRIANGLE_PIXELS, CrossingEngine
 from .scene_upload import UploadedScene
 
 log = logging.getLogger("xrayraster")
@@ -64,8 +64,8 @@ class PathLengthRenderer:
     ``small_triangle_pixels``: a triangle whose pixel box holds at most this many pixel centres
     is tested pixel by pixel in a compute pass; larger ones go through the rasteriser. It only
     moves work between two exact paths (the result is the same); 0 rasterises everything. The
-    default depends on the driver (:func:`~xrayraster.gl.crossings.default_small_triangle_pixels`):
-    64 on Mesa's CPU rasterisers, 0 on GPUs.
+    default, :data:`~xrayraster.gl.crossings.SMALL_TRIANGLE_PIXELS` (64), was the faster on llvmpipe
+    and on an NVIDIA H200 alike.
     """
 
     def __init__(
@@ -74,7 +74,7 @@ class PathLengthRenderer:
         *,
         supersampling: int = 1,
         overlap: str = "auto",
-        small_triangle_pixels: int | None = None,
+        small_triangle_pixels: int = SMALL_TRIANGLE_PIXELS,
         context: GLContext | None = None,
     ):
         self.geometry = geometry
@@ -82,8 +82,7 @@ class PathLengthRenderer:
         if int(supersampling) != supersampling or supersampling < 1:
             raise RenderError(f"supersampling must be a positive integer, got {supersampling!r}")
         check_choice(overlap, OVERLAP_MODES, "overlap", RenderError)
-        if small_triangle_pixels is not None and (int(small_triangle_pixels) != small_triangle_pixels
-                                                  or small_triangle_pixels < 0):
+        if int(small_triangle_pixels) != small_triangle_pixels or small_triangle_pixels < 0:
             raise RenderError(f"small_triangle_pixels must be an integer >= 0, got {small_triangle_pixels!r}")
         self.supersampling = int(supersampling)
         self.overlap = overlap
@@ -91,8 +90,7 @@ class PathLengthRenderer:
         self._owns_context = context is None
         self.gl = context or GLContext()
         self._check_size()
-        self.small_triangle_pixels = (default_small_triangle_pixels(self.gl) if small_triangle_pixels is None
-                                      else int(small_triangle_pixels))
+        self.small_triangle_pixels = int(small_triangle_pixels)
         self.engine = CrossingEngine(self._render_vec, self.gl, self.small_triangle_pixels)
         self.last_method: str | None = None
         self._planned: tuple = (None,)  # (scene, its revision, rays, the plan of _plan)

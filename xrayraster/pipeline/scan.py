@@ -12,6 +12,7 @@ import importlib.metadata
 import json
 import resource
 import time
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass
 from pathlib import Path
@@ -154,7 +155,9 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False, a
     loaded = scan_file_or_path if isinstance(scan_file_or_path, ScanFile) else load_scan_file(scan_file_or_path)
     plan(ScanJob(loaded, BATCH_VIEWS), ConfigError, f"{loaded.path} ", announce=progress is True)
     options = loaded.options
-    seconds = dict.fromkeys(STAGES, 0.0)  # projections and fdk take turns, so each is a sum
+    # Projections and FDK take turns (or, beside a GPU, overlap), so each is a sum and "total" the wall time.
+    seconds = dict.fromkeys(STAGES, 0.0)
+    started = time.perf_counter()
     with _timed(seconds, "sample"):
         scene = loaded.sample_scene(progress=progress is True)
     scanned = loaded.with_mount(scene)
@@ -214,7 +217,7 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False, a
         "units": {"volume": volume.unit, "lengths": "mm", "seconds": "s", "peak_rss": "MiB"},
         "libraries": {name: _version(name) for name in _LIBRARIES},
         "devices": devices,
-        "seconds": {**{k: round(v, 3) for k, v in seconds.items()}, "total": round(sum(seconds.values()), 3)},
+        "seconds": {**{k: round(v, 3) for k, v in seconds.items()}, "total": round(time.perf_counter() - started, 3)},
         # ru_maxrss is in KiB on Linux: the process's peak, which the scan's stages set.
         "peak_rss_mib": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
     }
@@ -271,23 +274,38 @@ def _project_into(stream: FDKStream, renderer: Renderer, scanned, loaded: ScanFi
     report, bar = _progress(progress, total)
     provenances, stacks = [], []
     starved = covered = 0  # over the views so far, pixels the sample covers
+
+    def add(first: int, data: np.ndarray) -> None:
+        with _timed(seconds, "fdk"):
+            stream.add(first, data)
+
+    # Beside a GL on a GPU (several physics workers), batch k's FDK (its filtering on the CPU, its
+    # backprojection on the OpenCL device) runs on a thread while batch k + 1 renders; beside llvmpipe
+    # it waits, as llvmpipe needs the cores the FDK would take.
+    overlapped = renderer.physics_workers > 1
+    adding = None
     try:
-        for first in range(0, total, stream.batch_views):
-            views = list(range(first, min(first + stream.batch_views, total)))
-            with _timed(seconds, "projections"):
-                batch = renderer.project_all(scanned, loaded.spectrum, views, detector=loaded.detector,
-                                             noise=loaded.options.noise, seed=loaded.options.seed,
-                                             realism=loaded.realism, spectral_table=True,
-                                             progress=lambda done, _, first=first: report(first + done, total))
-            provenances.append(batch.provenance)
-            starved += sum(batch.provenance["starved_covered_pixels"])
-            covered += sum(batch.provenance["covered_pixels"])
-            if not allow_starved:
-                refuse_if_starved(starved_share([starved], [covered]), str(loaded.path), views[-1] + 1)
-            with _timed(seconds, "fdk"):
-                stream.add(first, batch.data)
-            if keep:
-                stacks.append(batch.data)
+        with ThreadPoolExecutor(1, thread_name_prefix="xrayraster-fdk") as fdk:
+            for first in range(0, total, stream.batch_views):
+                views = list(range(first, min(first + stream.batch_views, total)))
+                with _timed(seconds, "projections"):
+                    batch = renderer.project_all(scanned, loaded.spectrum, views, detector=loaded.detector,
+                                                 noise=loaded.options.noise, seed=loaded.options.seed,
+                                                 realism=loaded.realism, spectral_table=True,
+                                                 progress=lambda done, _, first=first: report(first + done, total))
+                provenances.append(batch.provenance)
+                starved += sum(batch.provenance["starved_covered_pixels"])
+                covered += sum(batch.provenance["covered_pixels"])
+                if not allow_starved:
+                    refuse_if_starved(starved_share([starved], [covered]), str(loaded.path), views[-1] + 1)
+                if adding is not None:
+                    adding.result()
+                adding = fdk.submit(add, first, batch.data)
+                if not overlapped:
+                    adding.result()
+                if keep:
+                    stacks.append(batch.data)
+            adding.result()
     finally:
         if bar is not None:
             bar.close()
