@@ -286,6 +286,59 @@ def texgen_layer_to_layer(cell: UnitCell, cells=(1, 1), resolution: int = 24) ->
                         refused=refused, interpenetration_mm3=volume)
 
 
+def texgen_weave_2d(cell: UnitCell, resolution: int = 24) -> TexGenResult:
+    """One ply of a 2D weave ``cell`` (plain, twill, satin or a pattern) with TexGen's CTextileWeave2D.
+
+    TexGen's X yarns (along its x) are our warps, its Y yarns our wefts; X yarn ``i`` lies at
+    TexGen y = i · spacing and crossing ``j`` at x = j · spacing, z from 0 (the ply's bottom), so
+    TexGen (x, y, z) is our (y + s/2, x + s/2, z + margin_z). TexGen puts every X yarn over at
+    first; ``SwapPosition(j, i)`` sends warp ``i`` under weft ``j`` where our pattern has a 0. No
+    refinement (``bRefine`` off, the yarns' sections stay as given), in-plane tangents (TexGen's
+    default), ellipse sections of our widths and heights (TexGen's 2D weave draws ellipses), the
+    domain our yarn box. One ply and equal spacings only (CTextileWeave2D has one spacing)."""
+    if cell.plies != 1 or cell.warp_spacing != cell.weft_spacing:
+        raise WeaveError("TexGen's 2D weave is one ply with one yarn spacing: use plies = 1 and equal spacings")
+    if cell.warp_section.shape != "ellipse" or cell.weft_section.shape != "ellipse":
+        raise WeaveError("TexGen's 2D weave draws ellipses: give the cell ellipse sections")
+    reason = texgen_available()
+    if reason is not None:
+        raise RuntimeError(f"TexGen unavailable: {reason}")
+    core, s = _core, cell.warp_spacing
+    warps, wefts = cell.warp_positions, cell.weft_per_layer
+    start = time.perf_counter()
+    textile = core.CTextileWeave2D(warps, wefts, s, cell.ply_pitch, False, True)
+    textile.SetXYarnWidths(cell.warp_width)
+    textile.SetYYarnWidths(cell.weft_width)
+    textile.SetXYarnHeights(cell.warp_height)
+    textile.SetYYarnHeights(cell.weft_height)
+    textile.SetResolution(int(resolution))
+    for i, row in enumerate(cell.pattern):
+        for j, over in enumerate(row):
+            if not over:
+                textile.SwapPosition(j, i)
+    yarns = [(y, "weft") for j in range(wefts) for y in textile.GetYYarns(j)]
+    yarns += [(y, "warp") for i in range(warps) for y in textile.GetXYarns(i)]
+    built = time.perf_counter()
+    sx, sy, sz = cell.size
+    domain = core.CDomainPlanes(core.XYZ(-s / 2, -s / 2, -cell.margin_z), core.XYZ(sy - s / 2, sx - s / 2, sz - cell.margin_z))
+    surfaces = []
+    for yarn, _ in yarns:
+        surface = core.CMesh()
+        yarn.AddSurfaceToMesh(surface, domain, True, True)
+        surface.ConvertQuadstoTriangles()
+        surfaces.append(surface)
+    meshed = time.perf_counter()
+    shift = np.array([s / 2, s / 2, cell.margin_z])
+    meshes = [_trimesh(surface, 0.0).apply_translation(shift) for surface in surfaces]
+    converted = time.perf_counter()
+    volume, refused = yarn_overlap(meshes)
+    return TexGenResult(build_seconds=built - start, mesh_seconds=meshed - built, convert_seconds=converted - meshed,
+                        meshes=tuple(meshes), kinds=tuple(kind for _, kind in yarns),
+                        centrelines=tuple(_centreline(yarn, 0.0) + shift for yarn, _ in yarns),
+                        watertight_fraction=float(np.mean([m.is_watertight for m in meshes])),
+                        refused=refused, interpenetration_mm3=volume)
+
+
 def _centreline(yarn, lift: float) -> np.ndarray:
     """A TexGen yarn's slave nodes (its interpolated path, at the resolution it meshes with) as
     (k, 3) points in our frame: TexGen (x, y, z) is our (y, x, z − ``lift``)."""

@@ -1,16 +1,16 @@
 """Each weave family seen from its side and through a scan, for docs/weave.md ("Families").
 
-For every family, ``examples/twin_small.toml`` with ``[weave] family`` set (and ``cells`` so the
-sample stays about 20 mm across), one row of ``docs/images/weave_families.png``:
+For every family, ``examples/twin_small.toml`` with ``[weave] family`` set (and ``cells``, and the
+satin's spacings, so the sample stays about 20 mm across), one row of ``docs/images/weave_families.png``:
 
 * the path length through its warp yarns in a parallel beam along the weft (x): the binders'
-  paths through the thickness, the stuffers end on;
+  paths through the thickness, the stuffers end on, a 2D weave's warps undulating in each ply;
 * the scan's reconstruction (``xr.scan``: 120 noisy views of 128 columns, 0.23 mm voxels) and its
   labels on the y–z plane through the voxel column that holds the most warp.
 
 Usage::
 
-    python -m scripts.weave_families [--out-dir docs/images]     # ~1 min on 2 cores
+    python -m scripts.weave_families [--out-dir docs/images]     # ~2 min on 2 cores
 """
 
 from __future__ import annotations
@@ -30,13 +30,15 @@ from xrayraster.pipeline import load_scan_file
 from .common import DOCS, ROOT, say
 
 CELLS = {"layer_to_layer": [2, 2], "orthogonal": [1, 2], "through_thickness_angle_interlock": [2, 1],
-         "offset_angle_interlock": [2, 1]}
+         "offset_angle_interlock": [2, 1], "plain": [4, 4], "twill": [2, 2], "satin": [2, 2]}
+FIELDS = {"satin": {"warp_spacing": 2.0, "weft_spacing": 2.0}}  # a 10 mm cell, as the twill's
 LABEL_COLOURS = np.array([[0, 0, 0], [90, 90, 90], [230, 160, 40], [60, 140, 230]], np.uint8)  # air, matrix, weft, warp
 
 
 def scan_table(family: str) -> dict:
     table = tomllib.loads((ROOT / "examples" / "twin_small.toml").read_text())
     table["weave"]["family"] = family
+    table["weave"].update(FIELDS.get(family, {}))
     table["weave"]["sample"]["cells"] = CELLS[family]
     return table
 

@@ -143,6 +143,23 @@ def test_the_weave_estimate_is_near_the_triangles_made():
     assert made / 1.5 < estimated_triangles(small) < made * 1.5
 
 
+@pytest.mark.parametrize("family", ["plain", "twill", "satin"])
+def test_a_2d_weave_is_planned_from_its_table_and_refused_naming_plies(family):
+    """A ply's size from the [weave] table alone equals the built cell's, its triangle estimate is
+    within 1.5× of the meshes' at two resolutions (its yarns bend at every change of level), and a
+    sample of 10⁵ plies is refused before any yarn is made, naming plies."""
+    from xrayraster.weave import Sample, UnitCell
+    from xrayraster.weave.size import Size
+
+    assert Size.planned({"family": family, "plies": 2}, {}) == Size.of(Sample(UnitCell(family=family, plies=2)))
+    for points, rate in ((12, 2.0), (24, 4.0)):
+        small = Sample(UnitCell(family=family, plies=2), (1, 1), 1, points, rate)
+        made = sum(len(mesh.faces) for _, mesh in small.meshes())
+        assert made / 1.5 < estimated_triangles(small) < made * 1.5
+    with pytest.raises(xr.WeaveError, match=r"^plies = 100000: the woven sample"):
+        Sample(UnitCell(family=family, plies=100000)).meshes()
+
+
 def test_estimate_lines_and_refusals(monkeypatch):
     estimate = Estimate("job", 7300.0, (Part("a", 3 << 30, "[t] a = 1", "fix a"), Part("b", 1 << 20, "[t] b", "fix b")))
     assert estimate.long and "about 2 h and 3.00 GiB of memory (a 3.00 GiB, b 1.0 MiB)" in estimate.line()

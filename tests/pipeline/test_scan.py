@@ -349,6 +349,9 @@ FAMILY_CELLS = {  # the thick cell's box (5 x 5 x 4 mm), in each family's own fo
                                          "weft_spacing = 1.25\nwarp_positions = 2\nmargin_z = 0.92\n",
     "offset_angle_interlock": 'family = "offset_angle_interlock"\nweft_layers = 2\nweft_spacing = 1.25\n'
                               "warp_positions = 2\nmargin_z = 0.92\n",
+    "plain": 'family = "plain"\nplies = 1\nmargin_z = 0.92\n',
+    "twill": 'family = "twill"\nplies = 2\nwarp_spacing = 1.25\nweft_spacing = 1.25\nmargin_z = 0.92\n',
+    "satin": 'family = "satin"\nplies = 2\nwarp_spacing = 1.0\nweft_spacing = 1.0\nmargin_z = 0.92\n',
 }
 
 

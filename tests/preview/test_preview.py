@@ -690,6 +690,8 @@ def test_the_slice_button_shows_the_quick_slice_and_its_labels(browser, previewe
     ("layer_to_layer", set(), {"weave.binder_step", "weave.binder_offset", "weave.warp_ratio"}),
     ("orthogonal", {"weave.warp_ratio", "weave.binder_ratio"}, {"weave.binder_step", "weave.binder_offset"}),
     ("offset_angle_interlock", {"weave.binder_step", "weave.binder_offset"}, {"weave.warp_ratio"}),
+    ("plain", {"weave.plies"}, {"weave.weft_layers", "weave.weft_per_layer", "weave.binder_ratio", "weave.harness"}),
+    ("satin", {"weave.plies"}, {"weave.weft_layers", "weave.binder_step"}),
 ])
 def test_a_weave_shows_the_sliders_of_its_family(tmp_path, family, shown, hidden):
     """Each family's own fields get sliders at the cell's values; another family's fields, and the
@@ -704,3 +706,5 @@ def test_a_weave_shows_the_sliders_of_its_family(tmp_path, family, shown, hidden
     got = {c["key"]: c["value"] for c in controls(document, loaded)}
     assert shown <= set(got) and not hidden & set(got)
     assert all(got[key] == getattr(loaded.weave.sample.cell, key.split(".")[-1]) for key in shown)
+    if family == "satin":  # its harness, left to the family: the pattern's size
+        assert got["weave.harness"] == len(loaded.weave.sample.cell.pattern) == 5

@@ -20,7 +20,13 @@ from xrayraster.weave import Sample, UnitCell
 from xrayraster.weave.families import FAMILY_NAMES
 
 COARSE = {"points_per_section": 12, "samples_per_mm": 2.0}
-NEW = ("orthogonal", "through_thickness_angle_interlock", "offset_angle_interlock")
+NEW = ("orthogonal", "through_thickness_angle_interlock", "offset_angle_interlock", "plain", "twill", "satin")
+PLIES = ("plain", "twill", "satin")
+
+
+def cell_of(family: str, **kwargs) -> UnitCell:
+    """A small cell of ``family``: three weft layers, or two plies."""
+    return UnitCell(family=family, **({"plies": 2} if family in PLIES else {"weft_layers": 3}), **kwargs)
 
 
 # -- the paths, from each family's definition ---------------------------------------------------
@@ -51,8 +57,90 @@ def test_warp_and_binder_ratios_lay_out_the_warp_columns():
     assert sorted(set(UnitCell().binder_x)) == [1.25, 3.75, 6.25, 8.75]  # no stuffers: every column a binder's
 
 
+def test_the_named_2d_patterns_follow_their_drafts():
+    """Plain: every neighbour of a crossing the other way round. Twill over/under: each warp over
+    ``over`` consecutive wefts (cyclically), the next warp's run one weft on. Satin of n: each warp
+    under exactly one weft, each weft under exactly one warp, neighbouring warps' crossings at least
+    two wefts apart (no twill line)."""
+    plain = np.array(UnitCell(family="plain").pattern)
+    assert np.all(plain != np.roll(plain, 1, 0)) and np.all(plain != np.roll(plain, 1, 1))
+    for over, under in ((2, 2), (2, 1), (3, 1)):
+        twill = np.array(UnitCell(family="twill", floats=(over, under)).pattern)
+        assert twill.shape == (over + under,) * 2
+        for i, row in enumerate(twill):
+            assert np.array_equal(row, np.roll(twill[0], i)) and row.sum() == over
+            start = int(np.flatnonzero(row & ~np.roll(row, 1))[0])  # where the run over starts
+            assert np.all(np.roll(row, -start)[:over])
+    for n in (5, 7, 8):
+        satin = 1 - np.array(UnitCell(family="satin", harness=n).pattern)  # 1 where the warp is under
+        assert satin.shape == (n, n) and np.all(satin.sum(0) == 1) and np.all(satin.sum(1) == 1)
+        under = satin.argmax(1)
+        gaps = np.abs(np.diff(np.append(under, under[0])))
+        assert np.all(np.minimum(gaps, n - gaps) >= 2)
+
+
+def test_ply_yarns_lie_face_to_face_at_every_crossing_of_the_pattern():
+    """Each warp's node at a weft crossing is at the ply's mid-plane ± half the weft's height (over
+    where the pattern has 1), the weft's at ∓ half the warp's: the two touch there and fill the ply.
+    Ply k is shifted by k · ply_shift_mm."""
+    cell = UnitCell(family="twill", plies=3, ply_shift_mm=(0.6, 0.9))
+    sample = Sample(cell, cells=(1, 1))
+    pattern = np.array(cell.pattern)
+    for yarn in sample.yarns():
+        ply = int(yarn.name.split("_p")[1].split("_")[0])
+        index = int(yarn.name.rsplit("_", 1)[1][1:])
+        crossings = yarn.nodes[::4]  # a node a crossing, then three between
+        shift = np.array(cell.ply_shift_mm) * ply
+        if yarn.family == "warp":
+            assert np.allclose(crossings[:, 0], (index + 0.5) * cell.warp_spacing + shift[0])
+            j = np.rint((crossings[:, 1] - shift[1]) / cell.weft_spacing - 0.5).astype(int)
+            over = pattern[index % 4, j % 4]
+            assert np.allclose(crossings[:, 2], cell.ply_z(ply) + np.where(over, 0.5, -0.5) * cell.weft_height)
+        else:
+            assert np.allclose(crossings[:, 1], (index + 0.5) * cell.weft_spacing + shift[1])
+            i = np.rint((crossings[:, 0] - shift[0]) / cell.warp_spacing - 0.5).astype(int)
+            over = pattern[i % 4, index % 4]
+            assert np.allclose(crossings[:, 2], cell.ply_z(ply) + np.where(over, -0.5, 0.5) * cell.warp_height)
+    assert math.isclose(cell.weft_height + cell.warp_height, cell.ply_pitch)
+    assert math.isclose(cell.ply_pitch * 3 + 2 * cell.margin_z, cell.thickness)
+
+
+@pytest.mark.parametrize("family", PLIES)
+def test_a_float_stays_level_and_the_plain_weave_is_texgens_curve(family):
+    """Along every yarn the centre line stays within 2 % of its swing (half the crossing yarn's
+    height) of the ply's mid-plane ± that swing; a plain weave's is the smoothstep between
+    crossings, as TexGen's in-plane tangents draw it, to 0.5 % of the swing (the spline runs at
+    chord-length speed, not evenly along the yarn's axis)."""
+    from xrayraster.weave.sweep import CubicSpline3
+
+    cell = cell_of(family)
+    for yarn in Sample(cell, cells=(1, 1)).yarns():
+        spline = CubicSpline3(yarn.nodes, yarn.end_tangents)
+        points = spline(np.linspace(0.0, spline.length_parameter, 4001))
+        ply = int(yarn.name.split("_p")[1].split("_")[0])
+        swing = (cell.weft_height if yarn.family == "warp" else cell.warp_height) / 2
+        assert np.abs(points[:, 2] - cell.ply_z(ply)).max() <= 1.02 * swing
+        if family == "plain":
+            axis = 1 if yarn.family == "warp" else 0
+            crossings = yarn.nodes[::4]
+            spacing = crossings[1, axis] - crossings[0, axis]
+            k = np.clip(np.searchsorted(crossings[:, axis], points[:, axis], side="right") - 1, 0, len(crossings) - 2)
+            t = (points[:, axis] - crossings[k, axis]) / spacing
+            want = crossings[k, 2] + (crossings[k + 1, 2] - crossings[k, 2]) * t * t * (3 - 2 * t)
+            assert np.abs(points[:, 2] - want).max() < 0.005 * swing
+
+
 @pytest.mark.parametrize("kwargs, field", [
-    ({"family": "plain"}, "family"),
+    ({"family": "knit"}, "family"),
+    ({"family": "plain", "weft_layers": 3}, "weft_layers: family 'plain' takes no weft_layers"),
+    ({"family": "orthogonal", "plies": 2}, "plies"),
+    ({"family": "plain", "floats": (2, 2)}, "floats: family 'plain' takes no floats .* 'twill'"),
+    ({"family": "twill", "floats": (2, 2), "pattern": ((1, 0), (0, 1))}, "pattern or floats"),
+    ({"family": "satin", "harness": 4}, "harness"),
+    ({"family": "plain", "pattern": ((1, 0), (0,))}, r"pattern\[1\]"),
+    ({"family": "plain", "pattern": ((1, 2), (0, 1))}, r"pattern\[0\]\[1\]"),
+    ({"family": "plain", "warp_positions": 3}, "warp_positions .* the pattern's rows"),
+    ({"family": "plain", "ply_shift_mm": (1.0,)}, "ply_shift_mm"),
     ({"family": "orthogonal", "binder_step": 2}, "binder_step"),
     ({"family": "layer_to_layer", "binder_offset": 1}, "binder_offset"),
     ({"family": "through_thickness_angle_interlock", "binder_path": ((0, 1),)}, "binder_path"),
@@ -82,14 +170,14 @@ def test_the_dict_form_round_trips(family):
 
 @pytest.fixture(scope="module", params=NEW)
 def family_sample(request):
-    sample = Sample(UnitCell(family=request.param, weft_layers=3), cells=(1, 1))  # the default mesh resolution
+    sample = Sample(cell_of(request.param), cells=(1, 1))  # the default mesh resolution
     return sample, sample.meshes()
 
 
 def test_every_yarn_is_closed_oriented_and_inside_the_box(family_sample):
     sample, meshes = family_sample
     kinds = {yarn.kind for yarn, _ in meshes}
-    assert "binder" in kinds and "weft" in kinds
+    assert kinds >= {"weft", "warp" if sample.cell.family in PLIES else "binder"}
     lo, hi = sample.yarn_box
     for yarn, mesh in meshes:
         assert is_manifold(mesh) and mesh.is_winding_consistent and mesh.volume > 0, yarn.name
@@ -130,8 +218,13 @@ def test_the_yarn_volume_is_the_analytic_cells(family_sample):
     size = cell.size
     weft_area = _section_area(cell.weft_section, cell.weft_width, cell.weft_height)
     warp_area = _section_area(cell.warp_section, cell.warp_width, cell.warp_height)
-    analytic = len(cell.weft_y) * cell.weft_layers * weft_area * size[0]
-    analytic += len(cell.stuffer_x) * cell.stuffers * warp_area * size[1]
+    if cell.family in PLIES:  # every yarn undulates
+        analytic = sum((weft_area if yarn.family == "weft" else warp_area)
+                       * _inside_length(yarn.nodes, 0 if yarn.family == "weft" else 1, 0.0, size[0 if yarn.family == "weft" else 1])
+                       for yarn in sample.yarns())
+    else:
+        analytic = len(cell.weft_y) * cell.weft_layers * weft_area * size[0]
+        analytic += len(cell.stuffer_x) * cell.stuffers * warp_area * size[1]
     for yarn in sample.yarns():
         if yarn.kind == "binder":
             analytic += warp_area * _inside_length(yarn.nodes, 1, 0.0, size[1])
@@ -143,7 +236,8 @@ def test_the_yarn_volume_is_the_analytic_cells(family_sample):
 @pytest.mark.parametrize("family", NEW)
 def test_the_same_file_and_seed_give_the_same_bytes(family):
     def digest(seed: int) -> str:
-        table = {"family": family, "weft_layers": 3, "sample": {"cells": [1, 1], "seed": seed, **COARSE},
+        table = {"family": family, **({"plies": 2, "ply_shift_mm": [0.4, 0.2]} if family in PLIES else {"weft_layers": 3}),
+                 "sample": {"cells": [1, 1], "seed": seed, **COARSE},
                  "distortion": {"weft_node_mm": [0.0, 0.05, 0.03], "warp_node_mm": [0.05, 0.0, 0.03],
                                 "weft_scale": [0.03, 0.03], "warp_scale": [0.03, 0.03]}}
         sample, _ = weave_from_dict(table, {})

@@ -6,6 +6,7 @@ and refused with the loader's message when it is wrong)."""
 
 from __future__ import annotations
 
+from ..weave.families import FAMILIES, FAMILY_FIELDS
 from .document import Document
 
 # key, label, unit, kind ("number" or "integer"), slider min, max, step
@@ -29,6 +30,8 @@ _WEAVE = (
     ("weave.binder_ratio", "binder positions a group", "", "integer", 1, 8, 1),
     ("weave.binder_step", "columns a binder gap", "", "integer", 1, 8, 1),
     ("weave.binder_offset", "binder offset", "columns", "integer", 0, 16, 1),
+    ("weave.plies", "plies", "", "integer", 1, 16, 1),
+    ("weave.harness", "satin harness", "wefts", "integer", 5, 16, 1),
 )
 
 
@@ -50,11 +53,15 @@ def controls(document: Document, loaded) -> list[dict]:
                             filters.get(material, 0.0)))
     if document.kind == "scan" and loaded.weave is not None:
         sample = loaded.weave.sample
+        family = FAMILIES[sample.cell.family]
         for key, label, unit, kind, lo, hi, step in _WEAVE:
             name = key.split(".")[-1]
+            if ((name in FAMILY_FIELDS and name not in family.takes) or (name == "warp_ratio" and not sample.cell.stuffers)
+                    or (name == "weft_per_layer" and family.plies)):
+                continue  # a field of another family, a ratio of stuffers the cell has not, or a ply's pattern's
             value = sample.seed if name == "seed" else getattr(sample.cell, name)
-            if value is None or (name == "warp_ratio" and not sample.cell.stuffers):
-                continue  # a field of another family, or a ratio of stuffers the cell has not
+            if name == "harness" and value is None:
+                value = len(sample.cell.pattern)  # the satin's own
             out.append(_control(key, label, unit, kind, lo, hi, step, value))
     return out
 

@@ -1,6 +1,6 @@
-"""Weave families: how a unit cell's binders run through the weft stack, and which fields say so.
+"""Weave families: how a unit cell's yarns interlace, and which fields say so.
 
-Every family here is laid out on the same cell (:class:`~xrayraster.weave.UnitCell`): straight weft
+The 3D families are laid out on the same cell (:class:`~xrayraster.weave.UnitCell`): straight weft
 layers along x, straight warp stuffers along y in the gaps between them, and binders whose path is
 a gap per weft column (gap ``g`` lies between weft layers ``g − 1`` and ``g``; 0 below the bottom
 layer, ``n = weft_layers`` above the top one). A family is the rule for the binders' paths and its
@@ -20,6 +20,13 @@ but layer to layer), ``margin_z`` defaults to the room they take there: the warp
   to one period and must be a whole number of them).
 * ``offset_angle_interlock``: the same binders, position ``p`` shifted by ``p · binder_offset``
   columns along the warp.
+
+The 2D families weave a ply: a warp per row of a ``pattern`` (:mod:`~xrayraster.weave.patterns`),
+running along y over the wefts where its row has a 1 and under them where it has a 0, and a weft per
+column running along x the other way round, both undulating about the ply's mid-plane; ``plies``
+such plies are stacked in the cell's thickness, ply ``k`` shifted in x and y by ``k · ply_shift_mm``
+(the nesting of a laminate). ``plain``, ``twill`` (``floats``) and ``satin`` (``harness``) give the
+named patterns; ``pattern`` gives any other.
 """
 
 from __future__ import annotations
@@ -29,11 +36,18 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.errors import WeaveError
+from .patterns import Pattern, plain_pattern, satin_pattern, twill_pattern
 
 __all__ = ["FAMILIES", "FAMILY_NAMES", "Family"]
 
+#: The defaults of the fields a family leaves to itself (docs/weave.md).
+WEFT_LAYERS, WARP_POSITIONS, PLIES, FLOATS, HARNESS = 5, 4, 4, (2, 2), 5
+
 #: Fields only some families take (every family takes the cell's other fields).
-FAMILY_FIELDS = ("binders", "binder_position", "binder_path", "binder_step", "binder_offset")
+STACK_FIELDS = ("weft_layers", "stuffers", "warp_ratio", "binder_ratio")  # the 3D families'
+PLY_FIELDS = ("pattern", "plies", "ply_shift_mm")  # the 2D families'
+FAMILY_FIELDS = (*STACK_FIELDS, "binders", "binder_position", "binder_path", "binder_step", "binder_offset",
+                 *PLY_FIELDS, "floats", "harness")
 
 
 #: An orthogonal binder's nodes over a weft column, in units of the weft's half-width from the
@@ -48,18 +62,42 @@ ORTHOGONAL_PLATEAU = (-0.85, -0.75, 0.75, 0.85)
 @dataclass(frozen=True)
 class Family:
     """A family's rule: the family-specific fields it ``takes`` (of :data:`FAMILY_FIELDS`), and
-    its binders' nodes over a weft column (``plateau``; None: the sample's default)."""
+    its binders' nodes over a weft column (``plateau``; None: the sample's default; a 2D family's
+    yarns have one node a crossing)."""
 
     name: str
     takes: tuple[str, ...]
     plateau: tuple[float, ...] | None = None
+
+    @property
+    def plies(self) -> bool:
+        """Whether the family weaves 2D plies (else a 3D stack of weft layers and binders)."""
+        return "plies" in self.takes
+
+    @property
+    def default_weft_share(self) -> float:
+        """The weft's share of the yarns' thickness: 0.6 in a 3D stack, 0.5 in a ply."""
+        return 0.5 if self.plies else 0.6
+
+    def pattern(self, pattern: Pattern | None, floats: tuple[int, int] | None, harness: int | None) -> Pattern:
+        """A 2D family's pattern: ``pattern`` when given, else its own (:mod:`~xrayraster.weave.patterns`)."""
+        if pattern is not None:
+            return pattern
+        if self.name == "twill":
+            return twill_pattern(*(floats or FLOATS))
+        if self.name == "satin":
+            return satin_pattern(harness or HARNESS)
+        return plain_pattern()
 
     def default_stuffers(self, weft_layers: int) -> int:
         return weft_layers - 1 if self.name == "orthogonal" else 0
 
     def default_margin_z(self, thickness: float, weft_share: float, weft_layers: int) -> float:
         """mm: 0.4 layer to layer; for binders that run over the outer layers, the margin that just
-        holds them: ``m`` equal to the warp height ``(1 − weft_share) · (thickness − 2m) / (n − 1)``."""
+        holds them: ``m`` equal to the warp height ``(1 − weft_share) · (thickness − 2m) / (n − 1)``;
+        over and under ``n`` plies, a tenth of a ply: ``m = (thickness − 2m) / (10 n)``."""
+        if self.plies:
+            return thickness / (10 * weft_layers + 2)
         if self.name == "layer_to_layer":
             return 0.4
         rest = 1.0 - weft_share
@@ -74,7 +112,10 @@ class Family:
 
     def binder_count(self, warp_positions: int, weft_layers: int) -> int:
         """Binders a cell has when ``binders`` is not given: one per position, or, layer to
-        layer, one per position and pair of adjacent weft layers."""
+        layer, one per position and pair of adjacent weft layers; a 2D family's warps, which
+        interlace as binders do: one per position and ply."""
+        if self.plies:
+            return warp_positions * weft_layers
         return warp_positions * (weft_layers - 1) if self.name == "layer_to_layer" else warp_positions
 
     def path(self, i: int, n: int, w: int, p: int, step: int, offset: int) -> tuple[int, ...]:
@@ -138,9 +179,12 @@ def _zigzag(k: int, n: int) -> int:
 
 
 FAMILIES = {family.name: family for family in (
-    Family("layer_to_layer", ("binders", "binder_position", "binder_path")),
-    Family("orthogonal", ("binder_path",), ORTHOGONAL_PLATEAU),
-    Family("through_thickness_angle_interlock", ("binder_step",)),
-    Family("offset_angle_interlock", ("binder_step", "binder_offset")),
+    Family("layer_to_layer", (*STACK_FIELDS, "binders", "binder_position", "binder_path")),
+    Family("orthogonal", (*STACK_FIELDS, "binder_path"), ORTHOGONAL_PLATEAU),
+    Family("through_thickness_angle_interlock", (*STACK_FIELDS, "binder_step")),
+    Family("offset_angle_interlock", (*STACK_FIELDS, "binder_step", "binder_offset")),
+    Family("plain", PLY_FIELDS, (0.0,)),
+    Family("twill", (*PLY_FIELDS, "floats"), (0.0,)),
+    Family("satin", (*PLY_FIELDS, "harness"), (0.0,)),
 )}
 FAMILY_NAMES = tuple(FAMILIES)

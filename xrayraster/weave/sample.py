@@ -59,6 +59,7 @@ from .export import (
     write_report,
 )
 from .manifold_mesh import from_manifold, to_manifold
+from .plies import NODES_PER_CROSSING, ply_paths
 from .materials import as_yarn_materials
 from .resolve import interpenetration, resolve_boolean
 from .size import SAMPLE_DEFAULTS, WeaveJob
@@ -165,7 +166,7 @@ class Sample:
         gives on the regular cell's tightest binder bend (:func:`~xrayraster.weave.tessellation.path_error_mm`,
         the warp's half-height outside it). Each yarn's samples hold it along their whole path, dense in
         bends and sparse where the yarn runs straight; 0 (uniform samples) for a cell whose binders never bend."""
-        radius = smallest_bend_radius_mm(binder_curvature_along(Sample(self.cell).yarns(), self.cell.size[1]))
+        radius = smallest_bend_radius_mm(binder_curvature_along(Sample(self.cell).yarns(), self.cell.size))
         return bend_sagitta_mm(radius, 1.0 / self.samples_per_mm, self.cell.warp_height / 2)
 
     @property
@@ -188,6 +189,8 @@ class Sample:
         the draws of each yarn's own generator, and the yarns of one more period on each side join
         wherever the distortion can carry them into the box (:meth:`meshes` drops their slivers).
         """
+        if FAMILIES[self.cell.family].plies:
+            return self._ply_yarns()
         if self.distortion.is_zero:
             return self._regular_yarns()
         return self._distorted_yarns()
@@ -269,6 +272,36 @@ class Sample:
                                                      np.full(len(columns), cz * sz + c.gap_z(g))])
                             out.append(self._distorted(f"stuffer_c{cz}_x{cx}_s{s}_g{g}", "stuffer", nodes, warp))
         return out
+
+    def _ply_yarns(self) -> list[Yarn]:
+        """A 2D weave's warps and wefts (:mod:`~xrayraster.weave.plies`), their nodes moved by the
+        distortion's draws and each layer of cells by its shift, as the 3D families' are."""
+        d, regular = self.distortion, self.distortion.is_zero
+        shifts = [(0.0, 0.0) if regular else layer_shift(d, self.seed, cz) for cz in range(self.layers_of_cells)]
+        outlines = dict(zip(("weft", "warp"), self._outlines()))
+
+        def reaches(centre: float, axis: int, family: str) -> bool:
+            return self._reaches(centre, axis, outlines[family], family)
+
+        return [Yarn(name, family, family, nodes, outlines[family], ends) if regular
+                else self._distorted_ply(name, family, nodes, outlines[family], ends)
+                for name, family, nodes, ends in ply_paths(self.cell, self.cells, self.layers_of_cells, shifts,
+                                                           reaches)]
+
+    def _distorted_ply(self, name: str, family: str, nodes: np.ndarray, outline: np.ndarray, ends) -> Yarn:
+        """A 2D weave's yarn ``name`` with its crossings moved by its draws, the nodes between two
+        crossings by the draws eased linearly from one to the next."""
+        crossings = np.arange(0, len(nodes), NODES_PER_CROSSING)
+        axial = nodes[crossings, 0 if family == "weft" else 1]
+        move, scale, rotation = yarn_draws(self.distortion, family, yarn_rng(self.seed, name), axial)
+        every = np.arange(len(nodes))
+
+        def spread(values: np.ndarray) -> np.ndarray:
+            return np.stack([np.interp(every, crossings, v) for v in values.reshape(len(crossings), -1).T], axis=1)
+
+        varies = self.distortion.varies_section(family)
+        return Yarn(name, family, family, nodes + spread(move), outline, ends, spread(scale) if varies else None,
+                    spread(rotation)[:, 0] if varies else None)
 
     def _reaches(self, centre: float, axis: int, outline: np.ndarray, family: str) -> bool:
         """Whether a yarn whose regular centre line lies at ``centre`` (mm, along ``axis``) can reach the box."""
@@ -384,7 +417,8 @@ class Sample:
             parts.append(MeshPart(name, family, material, LABELS[family] if label is None else label,
                               PRIORITIES[family], mesh))
         kinds = [yarn.kind for yarn, _ in pieces]
-        yarns = {kind: kinds.count(kind) for kind in ("weft", "binder", "stuffer")}
+        listed = ("weft", "warp") if FAMILIES[self.cell.family].plies else ("weft", "binder", "stuffer")
+        yarns = {kind: kinds.count(kind) for kind in listed}
         return parts, {"yarns": {**yarns, "total": len(kinds)}, "tracers": sorted(tracers),
                        "interpenetration_mm3": overlap}
 

@@ -22,12 +22,17 @@ import dataclasses
 from dataclasses import dataclass
 
 from ..core.estimate import Estimate, Part
-from .families import FAMILIES
+from .families import FAMILIES, PLIES, WARP_POSITIONS, WEFT_LAYERS
+from .patterns import level_changes
 from .spec import UnitCell
 
 #: Triangles per (points of a section × samples per mm × mm of yarn): measured 0.38–0.62 on the
 #: default cell (1 × 1 to 3 × 3 cells, 12–24 points, 2–8 samples a mm, with and without distortion).
 TRIANGLES_PER_POINT_SAMPLE_MM = 0.5
+#: And per share of a 2D pattern's steps where a yarn changes level (:func:`~xrayraster.weave.patterns.level_changes`),
+#: whose bends keep its samples dense: measured 1.6–2.0 plain, 1.5–1.7 (2/2 twill), 0.8–0.95 (5-harness
+#: satin) in all at 12–24 points and 2–4 samples a mm, 1 × 1 cells of 2 plies.
+TRIANGLES_PER_LEVEL_CHANGE = 1.5
 #: Bytes a triangle holds: while the sample is meshed for a scene (the tubes, their clipped copies,
 #: the scene's; ~360 B from the twin's scan, pipeline/plan.py), while ``xrayraster weave`` exports it
 #: with overlaps left to priorities (the interpenetration measured and each family merged: 1.6 KB
@@ -60,7 +65,7 @@ _FIXES = {
     "cells": "use fewer cells (or layers_of_cells)",
     "layers_of_cells": "use fewer cells (or layers_of_cells)",
     "weft_per_layer": "use fewer weft yarns (weft_per_layer, weft_layers)",
-    "weft_layers": "use fewer weft yarns (weft_per_layer, weft_layers)",
+    "weft_layers": "use fewer weft yarns (weft_per_layer, weft_layers or plies)",
     "warp_positions": "use fewer warp yarns (warp_positions, binders, stuffers)",
     "binders": "use fewer warp yarns (warp_positions, binders, stuffers)",
     "stuffers": "use fewer warp yarns (warp_positions, binders, stuffers)",
@@ -91,6 +96,7 @@ class Size:
     family: str = "layer_to_layer"
     warp_ratio: int = 1
     binder_ratio: int = 1
+    level_changes: float = 0.0  # a 2D pattern's (patterns.level_changes); 0 in a 3D cell
 
     @classmethod
     def of(cls, sample) -> "Size":
@@ -99,7 +105,8 @@ class Size:
             return sample
         cell = sample.cell
         return cls(**{k: getattr(cell, k) for k in (*CELL_KEYS, *LAYOUT_KEYS)},
-                   **{k: getattr(sample, k) for k in SAMPLE_KEYS})
+                   **{k: getattr(sample, k) for k in SAMPLE_KEYS},
+                   level_changes=level_changes(cell.pattern) if cell.pattern else 0.0)
 
     @classmethod
     def planned(cls, cell: dict, sample: dict) -> "Size":
@@ -108,10 +115,20 @@ class Size:
         its own (other keys are ignored)."""
         defaults = {**{f.name: f.default for f in dataclasses.fields(UnitCell)}, **SAMPLE_DEFAULTS}
         given = {k: v for k, v in {**defaults, **cell, **sample}.items() if v is not None}
-        family, n = FAMILIES[given["family"]], given["weft_layers"]
-        given.setdefault("weft_per_layer", family.default_weft_per_layer(n, given.get("binder_step") or 1))
-        given.setdefault("stuffers", family.default_stuffers(n))
-        return cls(**{k: given.get(k) for k in (*CELL_KEYS, *SAMPLE_KEYS, *LAYOUT_KEYS)})
+        family = FAMILIES[given["family"]]
+        if family.plies:  # a warp per pattern row and a weft per column in each ply, no stuffers
+            pattern = family.pattern(given.get("pattern"), given.get("floats"), given.get("harness"))
+            given.update(warp_positions=len(pattern), weft_per_layer=len(pattern[0]),
+                         weft_layers=given.get("plies", PLIES), stuffers=0, level_changes=level_changes(pattern))
+        else:
+            n = given.setdefault("weft_layers", WEFT_LAYERS)
+            given.setdefault("warp_positions", WARP_POSITIONS)
+            given.setdefault("weft_per_layer", family.default_weft_per_layer(n, given.get("binder_step") or 1))
+            given.setdefault("stuffers", family.default_stuffers(n))
+        given.setdefault("warp_ratio", 1)
+        given.setdefault("binder_ratio", 1)
+        return cls(**{k: given.get(k) for k in (*CELL_KEYS, *SAMPLE_KEYS, *LAYOUT_KEYS)},
+                   level_changes=given.get("level_changes", 0.0))
 
     @property
     def binder_count(self) -> int:
@@ -125,7 +142,8 @@ class Size:
 
     @property
     def yarns_per_cell(self) -> int:
-        """Wefts (a row of ``weft_per_layer`` in each weft layer) and warps (binders and stuffers)."""
+        """Wefts (a row of ``weft_per_layer`` in each weft layer, a ply's one) and warps (binders, a
+        ply's warps, and stuffers)."""
         return self.weft_layers * self.weft_per_layer + self.binder_count + self.stuffer_columns * self.stuffers
 
     def yarn_length_mm(self) -> float:
@@ -139,8 +157,8 @@ class Size:
 
     def triangles(self) -> int:
         """About how many triangles the sample's yarns will have (module docstring)."""
-        return int(TRIANGLES_PER_POINT_SAMPLE_MM * self.points_per_section * self.samples_per_mm
-                   * self.yarn_length_mm())
+        per = TRIANGLES_PER_POINT_SAMPLE_MM + TRIANGLES_PER_LEVEL_CHANGE * self.level_changes
+        return int(per * self.points_per_section * self.samples_per_mm * self.yarn_length_mm())
 
     def largest_key(self) -> str:
         """The key furthest above its default (by the factor it multiplies the triangles with; the
@@ -150,8 +168,11 @@ class Size:
         return max(order, key=lambda key: _factor(self, key) / _factor(default, key))
 
     def key_text(self, key: str, tables: bool) -> str:
-        """``key = value`` as a file gives it, after its table (``[weave]``, ``[weave.sample]``) if ``tables``."""
-        value = getattr(self, key) if key != "binders" else self.binder_count
+        """``key = value`` as a file gives it, after its table (``[weave]``, ``[weave.sample]``) if ``tables``
+        (a 2D family's weft layers are its ``plies``, its warps its pattern's rows)."""
+        if FAMILIES[self.family].plies:
+            key = {"weft_layers": "plies", "binders": "warp_positions"}.get(key, key)
+        value = getattr(self, key if key != "plies" else "weft_layers") if key != "binders" else self.binder_count
         table = ("[weave.sample] " if key in SAMPLE_KEYS else "[weave] ") if tables else ""
         return f"{table}{key} = {list(value) if key == 'cells' else value}"
 
@@ -160,8 +181,8 @@ def _factor(size: Size, key: str) -> float:
     """How much ``key`` multiplies ``size``'s triangles by (up to a constant)."""
     if key == "cells":
         return size.cells[0] * size.cells[1]
-    if key == "binders":
-        return size.binder_count
+    if key == "binders":  # a 2D family's warps are its pattern's rows in every ply: plies name that
+        return size.warp_positions if FAMILIES[size.family].plies else size.binder_count
     if key == "stuffers":
         return 1 + size.stuffers
     return float(getattr(size, key))

@@ -1,4 +1,4 @@
-"""The unit cell of a 3D weave (layer-to-layer angle interlock by default): what a user measures on the loom.
+"""The unit cell of a weave (layer-to-layer angle interlock by default; 2D plies too): what a user measures on the loom.
 
 Frame (mm): weft yarns run along x and are spaced along y; warp yarns (binders, and optional
 straight stuffers) run along y and are spaced along x; z is the thickness, weft layer 0 at the
@@ -22,7 +22,8 @@ from ..core import fields
 from ..core.choices import check_choice
 from ..core.errors import ConfigError, WeaveError
 from ..core.validate import show
-from .families import FAMILIES, FAMILY_FIELDS, FAMILY_NAMES
+from .families import FAMILIES, FAMILY_FIELDS, FAMILY_NAMES, PLIES, WARP_POSITIONS, WEFT_LAYERS, Family
+from .patterns import checked_pattern
 
 __all__ = ["SECTION_SHAPES", "Section", "UnitCell"]
 
@@ -112,8 +113,14 @@ class Section:
 
 @dataclass(frozen=True)
 class UnitCell:
-    """One repeat of a 3D weave of the ``family`` (:mod:`~xrayraster.weave.families`); lengths in mm
-    (docs/weave.md).
+    """One repeat of a weave of the ``family`` (:mod:`~xrayraster.weave.families`): a 3D stack of weft
+    layers and binders, or 2D plies; lengths in mm (docs/weave.md).
+
+    A 2D family (plain, twill, satin) takes ``pattern`` (else its own, from ``floats`` or
+    ``harness``), ``plies`` (4) and ``ply_shift_mm`` ((0, 0)); it sets ``warp_positions`` and
+    ``weft_per_layer`` from the pattern, ``weft_layers`` to the plies (a weft layer each), no
+    stuffers or binders, ``weft_share`` 0.5 and ``margin_z`` a tenth of a ply. The rest below is
+    the 3D families'.
 
     Fields left as None take the family's values. Layer to layer (the default), ``binders``,
     ``binder_position`` and ``binder_path`` are generated: one binder per adjacent weft-layer pair
@@ -130,8 +137,8 @@ class UnitCell:
     """
 
     weft_per_layer: int | None = None
-    weft_layers: int = 5
-    warp_positions: int = 4
+    weft_layers: int | None = None
+    warp_positions: int | None = None
     binders: int | None = None
     binder_position: tuple[int, ...] | None = None
     binder_path: tuple[tuple[int, ...], ...] | None = None
@@ -140,17 +147,22 @@ class UnitCell:
     weft_spacing: float = 2.5
     warp_width_fraction: float = 0.8
     weft_width_fraction: float = 0.9
-    weft_share: float = 0.6
+    weft_share: float | None = None
     thickness: float = 4.0
     weft_section: Section = Section("power_ellipse", exponent=3.0)
     warp_section: Section = Section("lenticular")
     margin_xy: float = 0.0
     margin_z: float | None = None
     family: str = "layer_to_layer"
-    warp_ratio: int = 1
-    binder_ratio: int = 1
+    warp_ratio: int | None = None
+    binder_ratio: int | None = None
     binder_step: int | None = None
     binder_offset: int | None = None
+    pattern: tuple[tuple[int, ...], ...] | None = None
+    floats: tuple[int, int] | None = None
+    harness: int | None = None
+    plies: int | None = None
+    ply_shift_mm: tuple[float, float] | None = None
 
     def __post_init__(self):
         check_choice(self.family, FAMILY_NAMES, "family", WeaveError)
@@ -159,8 +171,78 @@ class UnitCell:
             if name not in family.takes and getattr(self, name) is not None:
                 takers = [f for f, rule in FAMILIES.items() if name in rule.takes]
                 raise WeaveError(f"{name}: family {self.family!r} takes no {name} (it belongs to "
-                                 f"{' and '.join(map(repr, takers))}); remove it or change family")
-        n = _int("weft_layers", self.weft_layers, 2, " (a 3D weave holds at least two weft layers)")
+                                 f"{', '.join(map(repr, takers))}); remove it or change family")
+        if family.plies:
+            self._lay_plies(family)
+        else:
+            self._lay_stack(family)
+        for name in ("warp_spacing", "weft_spacing", "thickness"):
+            _set(self, name, _number(name, getattr(self, name), lo=0.0, fix=" mm"))
+        for name in ("warp_width_fraction", "weft_width_fraction"):
+            _set(self, name, _number(name, getattr(self, name), lo=0.0, hi=1.0,
+                                     fix=" (a yarn wider than its spacing overlaps its neighbour; "
+                                         "lower the fraction or widen the spacing)"))
+        share = family.default_weft_share if self.weft_share is None else self.weft_share
+        _set(self, "weft_share", _number("weft_share", share, lo=0.0, hi=1.0, hi_open=True,
+                                         fix=" (the weft's share of the yarn stack thickness)"))
+        if self.margin_z is None:
+            _set(self, "margin_z", family.default_margin_z(self.thickness, self.weft_share, self.weft_layers))
+        for name in ("margin_xy", "margin_z"):
+            _set(self, name, _number(name, getattr(self, name), lo=0.0, lo_open=False, fix=" mm"))
+        for name in ("weft_section", "warp_section"):
+            section = getattr(self, name)
+            if isinstance(section, str):
+                section = Section(section)
+            if not isinstance(section, Section):
+                raise WeaveError(f"{name} must be a Section (or a shape name), got {show(section)}")
+            section.check(name)
+            _set(self, name, section)
+        if self.thickness <= 2 * self.margin_z:
+            raise WeaveError(f"thickness ({show(self.thickness)} mm) must exceed 2 · margin_z "
+                             f"({show(2 * self.margin_z)} mm): no room is left for the yarns; "
+                             "raise thickness or lower margin_z")
+        if not family.plies:
+            self._lay_binders(family)
+
+    def _lay_plies(self, family: Family) -> None:
+        """A 2D family's fields: the pattern (its rows the warps, its columns the wefts), the plies
+        (a weft layer each) and their shift; the 3D fields set as a ply has them (no stuffers, no binders)."""
+        if self.floats is not None:
+            floats = self.floats
+            if isinstance(floats, (str, bytes)) or not hasattr(floats, "__len__") or len(floats) != 2:
+                raise WeaveError(f"floats must be [over, under], the wefts a twill's warp runs over then under, "
+                                 f"got {show(floats)}")
+            _set(self, "floats", (_int("floats[0] (over)", floats[0], 1), _int("floats[1] (under)", floats[1], 1)))
+        if self.harness is not None:
+            _set(self, "harness", _int("harness", self.harness, 5, " (a satin needs at least 5 wefts in its repeat)"))
+        given = [name for name in ("floats", "harness") if getattr(self, name) is not None]
+        if self.pattern is not None and given:
+            raise WeaveError(f"give pattern or {given[0]}, not both: a pattern sets every crossing itself")
+        pattern = family.pattern(None if self.pattern is None else checked_pattern(self.pattern), self.floats,
+                                 self.harness)
+        _set(self, "pattern", pattern)
+        for name, count, what in (("warp_positions", len(pattern), "rows"), ("weft_per_layer", len(pattern[0]),
+                                                                            "columns")):
+            if getattr(self, name) is not None and getattr(self, name) != count:
+                raise WeaveError(f"{name} ({show(getattr(self, name))}) must equal the pattern's {what} ({count}): "
+                                 f"a {self.family} cell has a warp per row and a weft per column; leave {name} out")
+            _set(self, name, count)
+        plies = _int("plies", PLIES if self.plies is None else self.plies, 1, " (plies stacked in the cell)")
+        _set(self, "plies", plies)
+        shift = (0.0, 0.0) if self.ply_shift_mm is None else self.ply_shift_mm
+        if isinstance(shift, (str, bytes)) or not hasattr(shift, "__len__") or len(shift) != 2:
+            raise WeaveError(f"ply_shift_mm must be [x, y], each ply's shift from the one below (mm), got {show(shift)}")
+        _set(self, "ply_shift_mm", (_number("ply_shift_mm[0]", shift[0]), _number("ply_shift_mm[1]", shift[1])))
+        for name, value in (("weft_layers", plies), ("stuffers", 0), ("warp_ratio", 1), ("binder_ratio", 1)):
+            _set(self, name, value)
+        _set(self, "binder_position", ())
+        _set(self, "binder_path", ())
+
+    def _lay_stack(self, family: Family) -> None:
+        """A 3D family's weft layers, columns and warp positions, with its own defaults."""
+        n = _int("weft_layers", WEFT_LAYERS if self.weft_layers is None else self.weft_layers, 2,
+                 " (a 3D weave holds at least two weft layers)")
+        _set(self, "weft_layers", n)
         step = offset = None
         if "binder_step" in family.takes:
             step = _int("binder_step", 1 if self.binder_step is None else self.binder_step, 1,
@@ -179,45 +261,28 @@ class UnitCell:
             raise WeaveError(f"weft_per_layer ({w}) must be a multiple of the binders' period, 2 · weft_layers · "
                              f"binder_step = {period} columns, so the cell repeats; use {period} or "
                              f"{2 * period}")
-        p = _int("warp_positions", self.warp_positions, 1, " (warp positions across the cell)")
-        _set(self, "warp_ratio", _int("warp_ratio", self.warp_ratio, 1, " (stuffer columns after each group "
-                                                                        "of binder positions)"))
-        br = _int("binder_ratio", self.binder_ratio, 1, " (binder positions in each group)")
+        p = _int("warp_positions", WARP_POSITIONS if self.warp_positions is None else self.warp_positions, 1,
+                 " (warp positions across the cell)")
+        _set(self, "warp_positions", p)
+        _set(self, "warp_ratio", _int("warp_ratio", 1 if self.warp_ratio is None else self.warp_ratio, 1,
+                                      " (stuffer columns after each group of binder positions)"))
+        br = _int("binder_ratio", 1 if self.binder_ratio is None else self.binder_ratio, 1,
+                  " (binder positions in each group)")
         _set(self, "binder_ratio", br)
         if p % br:
             raise WeaveError(f"warp_positions ({p}) must be a multiple of binder_ratio ({br}): the warp columns "
                              "repeat in groups of binder_ratio binder positions")
-        for name in ("warp_spacing", "weft_spacing", "thickness"):
-            _set(self, name, _number(name, getattr(self, name), lo=0.0, fix=" mm"))
-        for name in ("warp_width_fraction", "weft_width_fraction"):
-            _set(self, name, _number(name, getattr(self, name), lo=0.0, hi=1.0,
-                                     fix=" (a yarn wider than its spacing overlaps its neighbour; "
-                                         "lower the fraction or widen the spacing)"))
-        _set(self, "weft_share", _number("weft_share", self.weft_share, lo=0.0, hi=1.0, hi_open=True,
-                                         fix=" (the weft's share of the yarn stack thickness)"))
-        if self.margin_z is None:
-            _set(self, "margin_z", family.default_margin_z(self.thickness, self.weft_share, n))
-        for name in ("margin_xy", "margin_z"):
-            _set(self, name, _number(name, getattr(self, name), lo=0.0, lo_open=False, fix=" mm"))
         stuffers = family.default_stuffers(n) if self.stuffers is None else self.stuffers
         stuffers = _int("stuffers", stuffers, 0)
         _set(self, "stuffers", stuffers)
         if stuffers > n - 1:
             raise WeaveError(f"stuffers must be <= weft_layers - 1 = {n - 1} (one per gap between weft layers), "
                              f"got {stuffers}")
-        for name in ("weft_section", "warp_section"):
-            section = getattr(self, name)
-            if isinstance(section, str):
-                section = Section(section)
-            if not isinstance(section, Section):
-                raise WeaveError(f"{name} must be a Section (or a shape name), got {show(section)}")
-            section.check(name)
-            _set(self, name, section)
-        if self.thickness <= 2 * self.margin_z:
-            raise WeaveError(f"thickness ({show(self.thickness)} mm) must exceed 2 · margin_z "
-                             f"({show(2 * self.margin_z)} mm): no room is left for the yarns; "
-                             "raise thickness or lower margin_z")
 
+    def _lay_binders(self, family: Family) -> None:
+        """A 3D family's binders: their count, positions and paths (generated or checked), and room for them."""
+        n, w, p = self.weft_layers, self.weft_per_layer, self.warp_positions
+        step, offset = self.binder_step, self.binder_offset
         b = self.binders
         b = family.binder_count(p, n) if b is None else _int("binders", b, 1, " (binder warp yarns per cell)")
         _set(self, "binders", b)
@@ -320,8 +385,18 @@ class UnitCell:
 
     @property
     def warp_height(self) -> float:
-        """The rest of the stack, over the weft_layers − 1 gaps between weft layers."""
-        return (1.0 - self.weft_share) * self.stack_thickness / (self.weft_layers - 1)
+        """The rest of the stack, over the weft_layers − 1 gaps between weft layers (in plies: over the plies)."""
+        gaps = self.weft_layers if FAMILIES[self.family].plies else self.weft_layers - 1
+        return (1.0 - self.weft_share) * self.stack_thickness / gaps
+
+    @property
+    def ply_pitch(self) -> float:
+        """A ply's thickness (mm): the stack over the plies (2D families)."""
+        return self.stack_thickness / self.weft_layers
+
+    def ply_z(self, ply: int) -> float:
+        """z of ply ``ply``'s mid-plane (mm), the bottom ply 0 (2D families)."""
+        return self.margin_z + (ply + 0.5) * self.ply_pitch
 
     @property
     def weft_layer_z(self) -> tuple[float, ...]:
@@ -376,10 +451,12 @@ class UnitCell:
             value = getattr(self, f.name)
             if value is None or (f.name in FAMILY_FIELDS and f.name not in takes):
                 continue
+            if f.name == "pattern" and (self.floats is not None or self.harness is not None):
+                continue  # generated from them, as they are given
             if isinstance(value, Section):
                 value = value.to_dict()
-            elif f.name == "binder_path":
-                value = [list(path) for path in value]
+            elif f.name in ("binder_path", "pattern"):
+                value = [list(row) for row in value]
             elif isinstance(value, tuple):
                 value = list(value)
             out[f.name] = value
@@ -437,6 +514,23 @@ class UnitCell:
         for key in ("weft_section", "warp_section"):
             if key in d:
                 kwargs[key] = Section.from_dict(d[key], key, where)
+        for key in ("harness", "plies"):
+            if key in d:
+                kwargs[key] = fields.integer(d[key], key, where, 1)
+        if "floats" in d:
+            kwargs["floats"] = fields.vector(d["floats"], "floats", where, 2, "[over, under], two counts of wefts",
+                                             element=fields.integer, lo=1)
+        if "ply_shift_mm" in d:
+            kwargs["ply_shift_mm"] = fields.vector(d["ply_shift_mm"], "ply_shift_mm", where, 2, "[x, y] in mm")
+        if "pattern" in d:
+            rows = d["pattern"]
+            if not isinstance(rows, list) or not rows:
+                raise ConfigError(f"{where}: pattern must be a list of rows of 0s and 1s (1: the warp over the "
+                                  f"weft), a row per warp yarn, got {show(rows)}")
+            kwargs["pattern"] = tuple(
+                fields.vector(r, f"pattern[{i}]", where, None, "a row of 0s and 1s, one a weft yarn",
+                              element=fields.integer, lo=0)
+                for i, r in enumerate(rows))
         return kwargs
 
 

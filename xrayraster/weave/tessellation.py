@@ -166,7 +166,7 @@ def binder_curvature(cell: UnitCell) -> list[tuple[np.ndarray, np.ndarray]]:
     :data:`~xrayraster.weave.binders.CURVATURE_SAMPLES` points per node interval)."""
     if not isinstance(cell, UnitCell):
         raise WeaveError(f"cell must be a UnitCell, got {show(cell)}")
-    return binder_curvature_along(Sample(cell).yarns(), cell.size[1])
+    return binder_curvature_along(Sample(cell).yarns(), cell.size)
 
 
 def binder_bend_radius_mm(cell: UnitCell) -> float:
