@@ -182,7 +182,8 @@ class ScanFile:
         materials = self.weave.materials.resolve()
         return {"cell": s.cell.to_dict(), "cells": list(s.cells), "layers_of_cells": s.layers_of_cells,
                 "points_per_section": s.points_per_section, "samples_per_mm": s.samples_per_mm, "seed": s.seed,
-                "distortion": s.distortion.to_dict(), "box_mm": self.box_mm.tolist(),
+                "distortion": s.distortion.to_dict(), **({} if s.voids.is_zero else {"voids": s.voids.to_dict()}),
+                "box_mm": self.box_mm.tolist(),
                 "materials": {family: repr(m) for family, m in materials.items()},
                 "tracers": [t.yarn for t in self.weave.materials.tracers]}
 

@@ -17,6 +17,7 @@ from ..core.errors import ConfigError
 from ..core.geometry import SCAN_KEYS
 from ..core.volume import VolumeGeometry
 from ..weave.distort import Distortion
+from ..weave.voids import Voids
 from ..weave.spec import Section, UnitCell
 from .pose import POSE_KEYS
 from .scan_file import SCAN_TABLES, ScanOptions
@@ -50,6 +51,7 @@ KEYS = {
     "weave": {**_names(f.name for f in dataclasses.fields(UnitCell)), "weft_section": _SECTION,
               "warp_section": _SECTION, "sample": _names(SAMPLE_TABLE_KEYS),
               "distortion": _names(f.name for f in dataclasses.fields(Distortion)),
+              "voids": _names(f.name for f in dataclasses.fields(Voids)),
               "materials": {"matrix": None, "weft": _BUNDLE, "warp": _BUNDLE, "tracers": None}},
     "materials": {ANY: _MATERIAL},
     "source": {**_names(SOURCE_REALISM_KEYS, *SOURCE_KINDS.values()), "filters": {ANY: None}},

@@ -1,8 +1,8 @@
 """Weave files (TOML): a woven sample to generate, and the scene file its export comes with.
 
-A weave file holds a ``[weave]`` table, the unit cell (docs/weave.md), with three optional
-sub-tables: ``[weave.sample]`` (tiling, mesh resolution, seed), ``[weave.distortion]`` and
-``[weave.materials]``; plus ``[materials.NAME]`` tables in the scene-file form for materials the
+A weave file holds a ``[weave]`` table, the unit cell (docs/weave.md), with four optional
+sub-tables: ``[weave.sample]`` (tiling, mesh resolution, seed), ``[weave.distortion]``,
+``[weave.voids]`` and ``[weave.materials]``; plus ``[materials.NAME]`` tables in the scene-file form for materials the
 library does not have. A material name is looked up in ``[materials]`` first, then in the
 library, as in scene files. The same ``[weave]`` table is what a scan file will hold.
 
@@ -36,6 +36,7 @@ from ..weave.materials import FibreBundle, Tracer, YarnMaterials
 from ..weave.sample import Sample
 from ..weave.size import Size, WeaveJob
 from ..weave.spec import UnitCell
+from ..weave.voids import Voids
 from .scene_file import library_material, parse_materials, read_toml
 
 __all__ = [
@@ -43,7 +44,7 @@ __all__ = [
     "write_scene_file",
 ]
 
-_SUBTABLES = ("sample", "distortion", "materials")
+_SUBTABLES = ("sample", "distortion", "materials", "voids")
 #: The keys of the ``[weave.sample]`` table.
 SAMPLE_TABLE_KEYS = {"cells", "layers_of_cells", "points_per_section", "samples_per_mm", "seed"}
 _FAMILIES = ("matrix", "weft", "warp")
@@ -106,8 +107,9 @@ def weave_from_dict(d, materials: dict[str, Material], where: str = "[weave]", *
     _check_size(cell, kwargs, grid_chooses_knobs, where.removesuffix("[weave]"))
     cell = UnitCell.from_arguments(cell, where)
     distortion = Distortion.from_dict(sub["distortion"], f"{where[:-1]}.distortion]")
+    voids = Voids.from_dict(sub["voids"], f"{where[:-1]}.voids]")
     try:
-        sample = Sample(cell, distortion=distortion, **kwargs)
+        sample = Sample(cell, distortion=distortion, voids=voids, **kwargs)
     except WeaveError as exc:
         raise ConfigError(f"{sample_where}: {exc}") from None
     return sample, _yarn_materials(sub["materials"], materials, f"{where[:-1]}.materials]")

@@ -44,6 +44,7 @@ from ..core.errors import WeaveError
 from ..core.estimate import plan
 from ..core.files import atomic_directory
 from ..core.validate import show
+from ..scene.materials import Material
 from ..scene.scene import Scene
 from .binders import binder_curvature_along, smallest_bend_radius_mm
 from .distort import Distortion, layer_shift, yarn_draws, yarn_rng
@@ -65,6 +66,7 @@ from .resolve import interpenetration, resolve_boolean
 from .size import SAMPLE_DEFAULTS, WeaveJob
 from .spec import UnitCell
 from .sweep import bend_sagitta_mm, polygon_area
+from .voids import Voids, draw_voids
 from .yarn import LABELS, PRIORITIES, Yarn, section_outline
 
 # LABELS, PRIORITIES, Yarn and section_outline live in .yarn; re-exported here, where users meet them
@@ -116,7 +118,8 @@ class Sample:
     weave's straight yarns reach past the box before the clip (a distorted sample's paths reach at
     least half a node spacing past it). ``distortion`` (:class:`Distortion`, all 0 by default: the
     regular weave, bit for bit) is drawn from ``seed`` (an integer >= 0): the same seed gives the
-    same sample.
+    same sample. ``voids`` (:class:`~xrayraster.weave.voids.Voids`, none by default) are drawn from
+    the same seed.
     """
 
     cell: UnitCell
@@ -127,6 +130,7 @@ class Sample:
     extend: float = 0.5
     distortion: Distortion = field(default_factory=Distortion)
     seed: int = 0
+    voids: Voids = field(default_factory=Voids)
 
     def __post_init__(self):
         if not isinstance(self.cell, UnitCell):
@@ -147,6 +151,8 @@ class Sample:
             raise WeaveError(f"extend must be a positive number of mm, got {show(ext)}")
         if not isinstance(self.distortion, Distortion):
             raise WeaveError(f"distortion must be a Distortion, got {show(self.distortion)}")
+        if not isinstance(self.voids, Voids):
+            raise WeaveError(f"voids must be a Voids, got {show(self.voids)}")
         if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
             raise WeaveError(f"seed must be an integer >= 0, got {show(self.seed)}")
         object.__setattr__(self, "seed", int(self.seed))
@@ -378,13 +384,19 @@ class Sample:
         ``measure=False`` that is empty unless the per-yarn boolean measured it anyway (a scan needs none).
         ``binder_label``: the binders labelled as a class of their own (``LABELS["binder"]``, a part of
         their own per family), the stuffers staying warp; their material and priority the warp's.
+        The matrix voids (:meth:`void_meshes`) follow the yarns, one part each (``per="yarn"``) or one
+        ``void`` part, and the dict's ``voids`` gives their count, volume and share of the box.
         """
         check_choice(per, EXPORT_PER, "per", WeaveError)
         check_choice(resolve, WEAVE_RESOLVE, "resolve", WeaveError)
         plan(WeaveJob(self, resolve, export=False), WeaveError)  # the boolean's pairs hold far more
         family_materials, tracers = self._materials(materials)
-        family_materials = {**family_materials, "binder": family_materials["warp"]}
+        family_materials = {**family_materials, "binder": family_materials["warp"], "void": Material.named("air")}
+        if not self.voids.is_zero and resolve == "boolean":
+            raise WeaveError("voids with resolve=\"boolean\" are not made: use resolve=\"priority\" (the scene's "
+                             "priorities give a void the matrix's space)")
         pieces = self.meshes(progress)
+        voids = self.void_meshes(pieces, progress)
 
         def labelled(yarn) -> str:  # the family a yarn is labelled as
             return "binder" if binder_label and yarn.kind == "binder" else yarn.family
@@ -407,6 +419,9 @@ class Sample:
                 groups = ("weft", "warp", "binder") if binder_label else ("weft", "warp")
                 merged = [(f, [m for y, m in pieces if labelled(y) == f and y.name not in tracers]) for f in groups]
                 objects = [(f, f, merge_meshes(meshes)) for f, meshes in merged if meshes] + objects
+            if voids:
+                objects += ([("void", "void", merge_meshes(voids))] if per == "family"
+                            else [(f"void_{k}", "void", mesh) for k, mesh in enumerate(voids)])
             if resolve == "boolean":  # a few parts: settled here, without touching shells inside a family
                 objects, matrix, after = settle(objects, PRIORITIES, self.box)
                 overlap.update({"after": after} if measure else {})
@@ -419,12 +434,33 @@ class Sample:
         kinds = [yarn.kind for yarn, _ in pieces]
         listed = ("weft", "warp") if FAMILIES[self.cell.family].plies else ("weft", "binder", "stuffer")
         yarns = {kind: kinds.count(kind) for kind in listed}
-        return parts, {"yarns": {**yarns, "total": len(kinds)}, "tracers": sorted(tracers),
-                       "interpenetration_mm3": overlap}
+        facts = {"yarns": {**yarns, "total": len(kinds)}, "tracers": sorted(tracers), "interpenetration_mm3": overlap}
+        if voids:
+            facts["voids"] = {"count": len(voids), "volume_mm3": float(sum(mesh.volume for mesh in voids)),
+                              "volume_fraction": float(sum(mesh.volume for mesh in voids) / np.prod(np.diff(self.box, axis=0)))}
+        return parts, facts
+
+    def void_meshes(self, pieces, progress: bool = False) -> list[trimesh.Trimesh]:
+        """The sample's matrix voids (:mod:`~xrayraster.weave.voids`), drawn from its seed inside the
+        matrix box, avoiding ``pieces`` (:meth:`meshes`) unless their placement is ``"anywhere"``;
+        ``"between_yarns"`` centres them between the outermost margins (``margin_z`` above the bottom,
+        below the top)."""
+        if self.voids.is_zero:
+            return []
+        _stage(progress, "drawing the matrix voids")
+        centres = self.box.copy()
+        if self.voids.placement == "between_yarns":
+            centres[:, :2] = self.yarn_box[:, :2]
+            centres[:, 2] += (self.cell.margin_z, -self.cell.margin_z)
+        try:
+            return draw_voids(self.voids, self.box, centres, pieces, yarn_rng(self.seed, "voids"))
+        except WeaveError as exc:
+            raise WeaveError(f"{exc} (seed {self.seed})") from None
 
     def scene(self, materials=None, *, resolve: str = "priority", per: str = "yarn", transform=None,
               progress: bool = False, binder_label: bool = False) -> Scene:
-        """An ``xr.Scene``: the matrix box (label 1, priority 0), wefts (2, 1) and warps (3, 2).
+        """An ``xr.Scene``: the matrix box (label 1, priority 0), wefts (2, 1) and warps (3, 2), and
+        the matrix voids (5, 0.5: air) where :attr:`voids` draws any.
 
         ``materials``: a :class:`~xrayraster.weave.materials.YarnMaterials`, None for its defaults
         (epoxy, and carbon-fibre bundles at fibre volume fraction 0.6), or a dict of its
@@ -469,7 +505,8 @@ class Sample:
         _stage(progress, "measuring the families' volumes")
         settings = {"cell": self.cell.to_dict(), "cells": list(self.cells), "layers_of_cells": self.layers_of_cells,
                     "points_per_section": self.points_per_section, "samples_per_mm": self.samples_per_mm,
-                    "seed": self.seed, "distortion": self.distortion.to_dict()}
+                    "seed": self.seed, "distortion": self.distortion.to_dict(),
+                    **({} if self.voids.is_zero else {"voids": self.voids.to_dict()})}
         report = export_report(parts, facts, settings, self.box, resolve=resolve, per=per, fmt=fmt)
         report["seconds"] = round(time.perf_counter() - start, 3)
         return parts, report

@@ -15,8 +15,9 @@ __all__ = ["LABELS", "PRIORITIES", "Yarn", "section_outline"]
 
 #: Label volume values and scene priorities: warp over weft over matrix where they share space. A
 #: binder is a warp; labelled as a class of its own (``binder_label``), it keeps the warp's priority.
-LABELS = {"matrix": 1, "weft": 2, "warp": 3, "binder": 4}
-PRIORITIES = {"matrix": 0, "weft": 1, "warp": 2, "binder": 2}
+#: A matrix void (:mod:`~xrayraster.weave.voids`) takes the matrix's space and never a yarn's.
+LABELS = {"matrix": 1, "weft": 2, "warp": 3, "binder": 4, "void": 5}
+PRIORITIES = {"matrix": 0, "weft": 1, "warp": 2, "binder": 2, "void": 0.5}
 
 
 def section_outline(section: Section, width: float, height: float, k: int) -> np.ndarray:
