@@ -267,12 +267,7 @@ def texgen_layer_to_layer(cell: UnitCell, cells=(1, 1), resolution: int = 24) ->
 
     sx, sy, sz = cell.size
     domain = core.CDomainPlanes(core.XYZ(0.0, 0.0, -cell.margin_z), core.XYZ(ny * sy, nx * sx, sz - cell.margin_z))
-    surfaces = []
-    for yarn, _ in yarns:
-        surface = core.CMesh()
-        yarn.AddSurfaceToMesh(surface, domain, True, True)
-        surface.ConvertQuadstoTriangles()
-        surfaces.append(surface)
+    surfaces = _surfaces(yarns, domain)
     meshed = time.perf_counter()
     meshes = [_trimesh(surface, cell.margin_z) for surface in surfaces]
     converted = time.perf_counter()
@@ -321,12 +316,7 @@ def texgen_weave_2d(cell: UnitCell, resolution: int = 24) -> TexGenResult:
     built = time.perf_counter()
     sx, sy, sz = cell.size
     domain = core.CDomainPlanes(core.XYZ(-s / 2, -s / 2, -cell.margin_z), core.XYZ(sy - s / 2, sx - s / 2, sz - cell.margin_z))
-    surfaces = []
-    for yarn, _ in yarns:
-        surface = core.CMesh()
-        yarn.AddSurfaceToMesh(surface, domain, True, True)
-        surface.ConvertQuadstoTriangles()
-        surfaces.append(surface)
+    surfaces = _surfaces(yarns, domain)
     meshed = time.perf_counter()
     shift = np.array([s / 2, s / 2, cell.margin_z])
     meshes = [_trimesh(surface, 0.0).apply_translation(shift) for surface in surfaces]
@@ -337,6 +327,17 @@ def texgen_weave_2d(cell: UnitCell, resolution: int = 24) -> TexGenResult:
                         centrelines=tuple(_centreline(yarn, 0.0) + shift for yarn, _ in yarns),
                         watertight_fraction=float(np.mean([m.is_watertight for m in meshes])),
                         refused=refused, interpenetration_mm3=volume)
+
+
+def _surfaces(yarns, domain) -> list:
+    """Each of ``yarns``' (TexGen yarn, kind) surfaces clipped to ``domain`` and capped there, in triangles."""
+    surfaces = []
+    for yarn, _ in yarns:
+        surface = _core.CMesh()
+        yarn.AddSurfaceToMesh(surface, domain, True, True)
+        surface.ConvertQuadstoTriangles()
+        surfaces.append(surface)
+    return surfaces
 
 
 def _centreline(yarn, lift: float) -> np.ndarray:

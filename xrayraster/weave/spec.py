@@ -503,14 +503,8 @@ class UnitCell:
                                                       "a list of warp positions, one a binder",
                                                       element=fields.integer, lo=0)
         if "binder_path" in d:
-            rows = d["binder_path"]
-            if not isinstance(rows, list) or not rows:
-                raise ConfigError(f"{where}: binder_path must be a list of paths (lists of gaps), one a binder, "
-                                  f"got {show(rows)}")
-            kwargs["binder_path"] = tuple(
-                fields.vector(r, f"binder_path[{i}]", where, None, "a list of gaps, one a weft column",
-                              element=fields.integer, lo=0)
-                for i, r in enumerate(rows))
+            kwargs["binder_path"] = _rows(d["binder_path"], "binder_path", where,
+                                          "a list of paths (lists of gaps), one a binder", "a list of gaps, one a weft column")
         for key in ("weft_section", "warp_section"):
             if key in d:
                 kwargs[key] = Section.from_dict(d[key], key, where)
@@ -523,16 +517,18 @@ class UnitCell:
         if "ply_shift_mm" in d:
             kwargs["ply_shift_mm"] = fields.vector(d["ply_shift_mm"], "ply_shift_mm", where, 2, "[x, y] in mm")
         if "pattern" in d:
-            rows = d["pattern"]
-            if not isinstance(rows, list) or not rows:
-                raise ConfigError(f"{where}: pattern must be a list of rows of 0s and 1s (1: the warp over the "
-                                  f"weft), a row per warp yarn, got {show(rows)}")
-            kwargs["pattern"] = tuple(
-                fields.vector(r, f"pattern[{i}]", where, None, "a row of 0s and 1s, one a weft yarn",
-                              element=fields.integer, lo=0)
-                for i, r in enumerate(rows))
+            kwargs["pattern"] = _rows(d["pattern"], "pattern", where, "a list of rows of 0s and 1s (1: the warp over "
+                                      "the weft), a row per warp yarn", "a row of 0s and 1s, one a weft yarn")
         return kwargs
 
+
+
+def _rows(rows, field: str, where: str, form: str, row_form: str) -> tuple[tuple[int, ...], ...]:
+    """A non-empty list of lists of integers >= 0 (binder paths, a pattern), each row checked and named."""
+    if not isinstance(rows, list) or not rows:
+        raise ConfigError(f"{where}: {field} must be {form}, got {show(rows)}")
+    return tuple(fields.vector(r, f"{field}[{i}]", where, None, row_form, element=fields.integer, lo=0)
+                 for i, r in enumerate(rows))
 
 
 _KEYS = {f.name for f in dataclass_fields(UnitCell)}
