@@ -25,6 +25,8 @@ from xrayraster.core import files
 from xrayraster.dataset.layouts import GENERATOR, HDF5_CHUNK, LAYOUTS
 from xrayraster.pipeline.scan import ScanResult
 
+from builds import all_entries, visible_files
+
 h5py = pytest.importorskip("h5py")
 nib = pytest.importorskip("nibabel")
 tifffile = pytest.importorskip("tifffile")
@@ -60,19 +62,6 @@ def write_three(layout: str, root: Path, **extras) -> ScanResult:
     for index, split in enumerate(SPLITS):
         LAYOUTS[layout].write_sample(root, index, scanned, record(index, split), name=NAME, **extras)
     return scanned
-
-
-def visible_files(root: Path) -> list[str]:
-    """Every file under ``root`` whose path has no hidden part, relative and sorted."""
-    found = []
-    for directory, dirs, names in os.walk(root):
-        dirs[:] = [d for d in dirs if not d.startswith(".")]
-        found += [str((Path(directory) / n).relative_to(root)) for n in names if not n.startswith(".")]
-    return sorted(found)
-
-
-def all_entries(root: Path) -> list[str]:
-    return sorted(str(p.relative_to(root)) for p in root.rglob("*"))
 
 
 # --- where the files go, and what finished() reads back -------------------------------------------
@@ -228,7 +217,7 @@ def test_failed_sample_not_finished_and_rerun_completes(tmp_path, layout, monkey
 KILLED_WRITER = """
 import os, signal, sys
 from pathlib import Path
-sys.path.insert(0, {tests!r})
+sys.path[:0] = [{tests!r}, os.path.dirname({tests!r})]  # this folder, and tests/ for its helpers
 from test_dataset_layout import LAYOUTS, LAST_WRITE, NAME, record, result
 from xrayraster.core import files
 chmod = os.chmod

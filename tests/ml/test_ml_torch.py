@@ -51,6 +51,17 @@ def test_the_torch_dataset_is_the_numpy_one_in_any_worker(torch, build):
         np.testing.assert_array_equal(la, lb)
 
 
+def test_the_extra_targets_are_tensors_a_loss_takes(torch, tmp_path):
+    """Instance ids as int64 (z, y, x), directions as float32 (3, z, y, x), the NumPy patches' values."""
+    root = write_build(tmp_path / "hdf5", "hdf5", SHAPES, ["train", "train", "test"],
+                       extra_labels=("instances", "directions"))
+    for target, dtype, shape in (("instances", torch.int64, (8, 8, 8)), ("directions", torch.float32, (3, 8, 8, 8))):
+        patches = xr.ml.PatchDataset(root, 8, patches_per_sample=2, flips=True, target=target)
+        image, tensor = patches.torch()[1]
+        assert tensor.dtype == dtype and tuple(tensor.shape) == shape and tuple(image.shape) == (1, 8, 8, 8)
+        np.testing.assert_array_equal(tensor.numpy(), patches[1][1])
+
+
 def test_a_unet_trains_on_patches_and_segments_a_volume(torch, tmp_path):
     """Volumes whose classes differ in attenuation (plus noise): a small MONAI U-Net's loss falls
     over 40 iterations, and predict_volume returns a label volume of the input's shape."""

@@ -22,6 +22,7 @@ DATASET_SPLITS = ("train", "val", "test")  # the parts a dataset's samples are s
 DATASET_KEEP = ("projections", "meshes")  # what a dataset build keeps beside each sample's volumes
 LABEL_CLASSES = ("classes", "binder")  # a woven scan's class volume: binders in warp (3), or a class of their own (4)
 LABEL_EXTRAS = ("instances", "directions", "centrelines")  # beside a woven scan's classes (docs/labels.md)
+PATCH_TARGETS = ("classes", "instances", "directions")  # what xr.ml.PatchDataset crops beside the volume
 
 
 def is_switch(value) -> bool:

@@ -93,8 +93,8 @@ def _folders(root: Path) -> list[Path]:
 
 def _remove_samples(root: Path, earlier: dict) -> None:
     """Remove the samples of an earlier build (``earlier``: its identity): the files its layout
-    names, those its samples' folders record (kept projections, meshes) and the folders they leave
-    empty, nothing else (a person's files stay)."""
+    names (their extra labels' too), those its samples' folders record (kept projections, meshes)
+    and the folders they leave empty, nothing else (a person's files stay)."""
     layout = LAYOUTS[earlier["layout"]]
     folders = set()
     for index, record in layout.finished(root, earlier["name"]).items():
@@ -103,7 +103,7 @@ def _remove_samples(root: Path, earlier: dict) -> None:
                 for entry in directory_entries(root / folder, marker, GENERATOR)[0]:  # the recorded ones
                     remove_entry(root / folder / entry)
             folders.add(root / folder)
-        for relative in layout.sample_paths(index, record["split"], earlier["name"]):
+        for relative in layout.sample_paths(index, record["split"], earlier["name"], record.get("extra_labels", ())):
             remove_entry(root / relative)
             folders.update((root / relative).parents)
     for folder in sorted(folders - set(root.parents) - {root}, key=lambda f: -len(f.parts)):  # deepest first

@@ -24,6 +24,10 @@ __all__ = ["PLAN_DRAWS", "check_sample", "format_plan", "plan_lines", "plan_rows
 #: Bytes a voxel of a sample takes on disk: the float32 volume and the uint8 labels (uncompressed;
 #: the build adds the projections when it keeps them).
 BYTES_PER_VOXEL = 4 + 1
+#: And those of each extra label a scan file asks for (``[scan] labels``), as the tiff and hdf5
+#: layouts store them uncompressed: uint16 instance ids, three float16 direction components (the
+#: nnunet layout's float32 ones are gzipped, zero outside the yarns); centre lines take a few kB.
+EXTRA_BYTES_PER_VOXEL = {"instances": 2, "directions": 3 * 2, "centrelines": 0}
 #: The most samples ``--plan`` draws (about 20 s of draws); a larger count's totals are extrapolated
 #: from these, the first samples, which a build makes first.
 PLAN_DRAWS = 50
@@ -51,12 +55,14 @@ def plan_row(dataset: DatasetFile, index: int) -> dict:
 
 
 def sample_bytes(scan_file, keep=()) -> int:
-    """A sample's bytes on disk, uncompressed: its volume and labels, and its projections (float32)
-    when ``keep`` holds ``"projections"`` (meshes, when kept, are not counted: a few MB)."""
+    """A sample's bytes on disk, uncompressed: its volume, labels and extra labels, and its
+    projections (float32) when ``keep`` holds ``"projections"`` (meshes, when kept, are not
+    counted: a few MB)."""
     nz, ny, nx = scan_file.volume.shape
     rows, cols = scan_file.geometry.detector_shape
     kept = 4 * scan_file.geometry.num_views * rows * cols if "projections" in keep else 0
-    return nz * ny * nx * BYTES_PER_VOXEL + kept
+    per_voxel = BYTES_PER_VOXEL + sum(EXTRA_BYTES_PER_VOXEL[label] for label in scan_file.options.labels[1:])
+    return nz * ny * nx * per_voxel + kept
 
 
 def format_plan(rows: list[dict]) -> str:

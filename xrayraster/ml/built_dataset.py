@@ -8,9 +8,14 @@ each sample's volume and labels as arrays that read only what is sliced (never a
 * ``nnunet``: nibabel's array proxies of the ``.nii.gz`` files, sliced along NIfTI's slowest axis
   (our z), so a slice decompresses up to its last z plane and keeps only its planes.
 
+The extra labels a build's scans made (``[scan] labels``) are read the same way, from their own
+files (the ``directions`` (3, z, y, x), the components first; the ``nnunet`` layout's components are
+NIfTI's slowest axis, so a slice there decompresses nearly the whole file).
+
 Arrays are indexed (z, y, x) as everywhere in xrayraster; the volume is float32 cm⁻¹, the labels
-uint8 (0 background, 1 matrix, 2 weft, 3 warp, 4 and up tracers: docs/dataset_layouts.md). Open files are
-kept per process (a PyTorch ``DataLoader`` worker opens its own), never pickled.
+uint8 (0 background, 1 matrix, 2 weft, 3 warp, 4 and up tracers: docs/dataset_layouts.md), the
+instances uint16, the directions float16 (float32 in ``nnunet``). Open files are kept per process
+(a PyTorch ``DataLoader`` worker opens its own), never pickled.
 """
 
 from __future__ import annotations
@@ -33,13 +38,15 @@ from ..io.optional import optional_module
 class BuiltDataset:
     """The complete samples of the build in ``root`` (a build still running, or killed, shows those it
     finished): ``layout`` and ``name`` from its ``build.json``; from the samples' records, ``splits``
-    (sample index → ``train``, ``val`` or ``test``) and ``labels`` (label value → name, 0 background)."""
+    (sample index → ``train``, ``val`` or ``test``), ``labels`` (label value → name, 0 background)
+    and ``extra_labels`` (sample index → the extra labels stored with it, such as ``("instances",)``)."""
 
     root: Path
     layout: str
     name: str
     splits: dict
     labels: dict
+    extra_labels: dict = field(default_factory=dict)
     _open: dict = field(default_factory=dict, compare=False, repr=False)  # (pid, index) → arrays
 
     @classmethod
@@ -55,7 +62,7 @@ class BuiltDataset:
         for record in records.values():
             labels.update((int(k), v) for k, v in record.get("labels", {}).items())
         return cls(root, identity["layout"], identity["name"], {i: r["split"] for i, r in records.items()},
-                   dict(sorted(labels.items())))
+                   dict(sorted(labels.items())), {i: tuple(r.get("extra_labels", ())) for i, r in records.items()})
 
     def indices(self, split: str | None) -> list[int]:
         """The samples of ``split`` (None: all), in order; ConfigError for an unknown or empty split."""
@@ -76,12 +83,23 @@ class BuiltDataset:
             self._open[key] = _OPENERS[self.layout](paths)
         return self._open[key]
 
+    def extra_label(self, index: int, label: str):
+        """The extra label ``label`` (``"instances"`` or ``"directions"``) of sample ``index``: a lazy
+        array as :meth:`arrays` gives, (z, y, x) or, for the directions, (3, z, y, x)."""
+        key = (os.getpid(), index, label)
+        if key not in self._open:
+            layout = LAYOUTS[self.layout]
+            path = layout.extra_label_paths(index, self.splits[index], self.name, (label,))[label]
+            self._open[key] = _EXTRA_OPENERS[self.layout](self.root / path, label)
+        return self._open[key]
+
     def __getstate__(self):
         return {**self.__dict__, "_open": {}}  # open files stay with their process
 
 
 class _Transposed:
-    """A NIfTI array proxy (x, y, z) seen as (z, y, x), sliced by basic slices only."""
+    """A NIfTI array proxy (x, y, z[, component]) seen as ([component,] z, y, x), sliced by basic
+    slices only."""
 
     def __init__(self, proxy, dtype):
         self.proxy, self.dtype = proxy, dtype
@@ -89,7 +107,7 @@ class _Transposed:
 
     def __getitem__(self, key):
         key = key if isinstance(key, tuple) else (key,)
-        key += (slice(None),) * (3 - len(key))
+        key += (slice(None),) * (len(self.shape) - len(key))
         return np.asarray(self.proxy[key[::-1]], dtype=self.dtype).T
 
 
@@ -105,10 +123,25 @@ def _hdf5(paths):
     return f["raw"], f["label"]
 
 
-def _nnunet(paths):
+def _nnunet(paths, dtypes=(np.float32, np.uint8)):
     nib = optional_module("nibabel", "dataset", "reading nnU-Net dataset builds")
-    return tuple(_Transposed(nib.load(p, keep_file_open=True).dataobj, dtype)
-                 for p, dtype in zip(paths[:2], (np.float32, np.uint8)))
+    return tuple(_Transposed(nib.load(p, keep_file_open=True).dataobj, dtype) for p, dtype in zip(paths, dtypes))
 
 
 _OPENERS = {"tiff": _tiff, "hdf5": _hdf5, "nnunet": _nnunet}
+
+
+def _tiff_extra(path, label):
+    return _tiff([path])[0]
+
+
+def _hdf5_extra(path, label):
+    h5py = optional_module("h5py", "dataset", "reading HDF5 dataset builds")
+    return h5py.File(path, "r")[label]  # opened again: HDF5 shares the open file in a process
+
+
+def _nnunet_extra(path, label):
+    return _nnunet([path], (np.uint16 if label == "instances" else np.float32,))[0]
+
+
+_EXTRA_OPENERS = {"tiff": _tiff_extra, "hdf5": _hdf5_extra, "nnunet": _nnunet_extra}

@@ -30,10 +30,16 @@ What a patch is, and the choices made:
   (docs/ml.md): over the shifted scans, the class medians differ from the training scans' by 0.025
   of the scale with it, by 0.054 with ``Percentiles()``, whose 98th percentile a tracer and a
   holder move.
-* **Flips.** ``flips=True`` flips each axis with probability ½, the image and its labels together.
-  No 90° turns: they would turn weft into the direction of warp, a cue the classes are told by.
+* **Target.** ``target`` is what is cropped beside the image: ``"classes"`` (the class labels,
+  uint8), or an extra label the build's scans made (``[scan] labels`` in its dataset file):
+  ``"instances"`` (one id per yarn, uint16) or ``"directions"`` ((3, z, y, x) float32, the x, y, z
+  components of each yarn voxel's unit direction, 0 elsewhere). Class balance keeps placing
+  patches by the class labels whatever the target (a yarn's id says nothing of its class's share).
+* **Flips.** ``flips=True`` flips each axis with probability ½, the image and its target together;
+  a direction's component along a flipped axis changes sign with it, so it still points along its
+  yarn. No 90° turns: they would turn weft into the direction of warp, a cue the classes are told by.
 * **Reading.** A patch reads only its crop (:mod:`.built_dataset`); a volume smaller than the patch
-  is padded with 0 (air) and label 0.
+  is padded with 0 (air) and a target of 0.
 """
 
 from __future__ import annotations
@@ -43,8 +49,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core.choices import PATCH_TARGETS, check_choice
 from ..core.errors import ConfigError
 from .built_dataset import BuiltDataset
+
+#: The type of each target's patches (the directions are float16 on disk, float32 to a network).
+TARGET_TYPES = {"classes": np.uint8, "instances": np.uint16, "directions": np.float32}
 
 
 class _Intensity:
@@ -156,17 +166,20 @@ class _SampleIndex:
 
 
 class PatchDataset:
-    """Aligned (image, label) patches of ``patch_size`` voxels (an int, or (z, y, x)) from the
+    """Aligned (image, target) patches of ``patch_size`` voxels (an int, or (z, y, x)) from the
     ``split`` (``train``, ``val``, ``test``, or None for all) of the build in ``root``, in any layout;
-    the module docstring says how they are placed, normalised and flipped. ``dataset[i]`` is
-    (image float32, labels uint8), both (z, y, x); :meth:`torch` gives a ``torch.utils.data.Dataset``."""
+    the module docstring says how they are placed, normalised and flipped, and what ``target`` may
+    be. ``dataset[i]`` is (image float32 (z, y, x), target): the class labels uint8 (z, y, x) by
+    default, the instances uint16 (z, y, x) or the directions float32 (3, z, y, x);
+    :meth:`torch` gives a ``torch.utils.data.Dataset``."""
 
     def __init__(self, root, patch_size=64, *, split: str | None = "train", patches_per_sample: int = 16,
                  class_shares="balanced", normalize=None, flips: bool = False, seed: int = 0,
-                 index_block: int = 4):
+                 index_block: int = 4, target: str = "classes"):
         self.dataset = BuiltDataset.open(root)
         self.samples = self.dataset.indices(split)
         self.split = split
+        self.target = _target(target, self.dataset, self.samples, split)
         self.patch_size = patch_shape(patch_size)
         self.patches_per_sample = _positive("patches_per_sample", patches_per_sample)
         self.index_block = _positive("index_block", index_block)
@@ -187,11 +200,12 @@ class PatchDataset:
         volume, labels = self.dataset.arrays(patch.sample)
         image = self.normalize.scaled(_crop(volume, patch.start, self.patch_size, np.float32),
                                       self.sample_index(patch.sample).bounds)
-        label = _crop(labels, patch.start, self.patch_size, np.uint8)
+        source = labels if self.target == "classes" else self.dataset.extra_label(patch.sample, self.target)
+        target = _crop(source, patch.start, self.patch_size, TARGET_TYPES[self.target])
         axes = tuple(a for a, f in enumerate(patch.flipped) if f)
         if axes:
-            image, label = np.flip(image, axes).copy(), np.flip(label, axes).copy()
-        return image, label
+            image, target = np.flip(image, axes).copy(), _flipped(target, axes)
+        return image, target
 
     def set_epoch(self, epoch: int) -> None:
         """Draw the patches of ``epoch`` (module docstring)."""
@@ -278,12 +292,26 @@ def intensity_bounds(normalize, volume, stride: int) -> tuple[float, float]:
 
 
 def _crop(array, start, size, dtype) -> np.ndarray:
-    """``array[start : start + size]``, padded with 0 past its end."""
-    stop = [min(b + p, n) for b, p, n in zip(start, size, array.shape)]
-    data = np.asarray(array[start[0]:stop[0], start[1]:stop[1], start[2]:stop[2]], dtype=dtype)
-    if data.shape != tuple(size):
-        data = np.pad(data, [(0, p - d) for p, d in zip(size, data.shape)])
+    """``array[..., start : start + size]`` over its last three axes (z, y, x; a first axis, the
+    directions' components, whole), padded with 0 past its end."""
+    lead = tuple(array.shape[:-3])
+    stop = [min(b + p, n) for b, p, n in zip(start, size, array.shape[-3:])]
+    key = (slice(None),) * len(lead) + tuple(slice(b, e) for b, e in zip(start, stop))
+    data = np.asarray(array[key], dtype=dtype)
+    if data.shape != (*lead, *size):
+        data = np.pad(data, [(0, p - d) for p, d in zip((*lead, *size), data.shape)])
     return data
+
+
+def _flipped(target: np.ndarray, axes: tuple) -> np.ndarray:
+    """``target`` flipped along the spatial ``axes`` (0 z, 1 y, 2 x). A direction field's (3, z, y,
+    x) component along a flipped axis (component 2 - axis: they are x, y, z) changes sign."""
+    lead = target.ndim - 3
+    out = np.flip(target, tuple(a + lead for a in axes)).copy()
+    if lead:
+        for a in axes:
+            out[2 - a] *= -1
+    return out
 
 
 def patch_shape(patch_size) -> tuple[int, int, int]:
@@ -309,6 +337,19 @@ def _whole(name: str, value) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
         raise ConfigError(f"{name} must be an integer >= 0, got {value!r}")
     return int(value)
+
+
+def _target(target, dataset: BuiltDataset, samples: list[int], split) -> str:
+    """``target`` checked (:data:`~xrayraster.core.choices.PATCH_TARGETS`), and held by every sample
+    of the split: else ConfigError naming the target and the fix."""
+    check_choice(target, PATCH_TARGETS, "target", ConfigError)
+    lacking = [i for i in samples if target != "classes" and target not in dataset.extra_labels.get(i, ())]
+    if lacking:
+        which = ("this build's samples have" if len(lacking) == len(samples) else
+                 f"{len(lacking)} of the {len(samples)} samples of split {split!r} (sample {lacking[0]} first) have")
+        raise ConfigError(f"target {target!r}: {which} no {target}; add \"{target}\" to [scan] labels in the dataset "
+                          "file and build again")
+    return target
 
 
 def _shares(class_shares, labels: dict) -> dict:

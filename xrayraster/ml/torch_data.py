@@ -8,10 +8,10 @@ torch = optional_module("torch", "ml", "PatchDataset.torch()")
 
 
 class TorchPatches(torch.utils.data.Dataset):
-    """``patches[i]`` as tensors: the image (1, z, y, x) float32 (one channel), the labels (z, y, x)
-    int64 (the class indices a cross-entropy loss takes). Patches are drawn as the NumPy dataset's
-    (the same seed, epoch and item give the same tensors in any ``DataLoader`` worker);
-    :meth:`set_epoch` draws new ones."""
+    """``patches[i]`` as tensors: the image (1, z, y, x) float32 (one channel), and the target: class
+    labels or instance ids (z, y, x) as int64 (the indices a cross-entropy loss takes), directions
+    (3, z, y, x) float32 as they are. Patches are drawn as the NumPy dataset's (the same seed, epoch
+    and item give the same tensors in any ``DataLoader`` worker); :meth:`set_epoch` draws new ones."""
 
     def __init__(self, patches):
         self.patches = patches
@@ -20,8 +20,9 @@ class TorchPatches(torch.utils.data.Dataset):
         return len(self.patches)
 
     def __getitem__(self, item: int):
-        image, labels = self.patches[item]
-        return torch.from_numpy(image[None]), torch.from_numpy(labels.astype("int64"))
+        image, target = self.patches[item]
+        integer = target.dtype.kind != "f"  # class labels and instance ids: the indices a loss takes
+        return torch.from_numpy(image[None]), torch.from_numpy(target.astype("int64") if integer else target)
 
     def set_epoch(self, epoch: int) -> None:
         self.patches.set_epoch(epoch)
