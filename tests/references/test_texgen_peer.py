@@ -99,21 +99,13 @@ def test_an_orthogonal_cell_matches_texgens():
     the binders' centre lines, TexGen's path points against ours, 0.1 of the binder's height apart
     in RMS (at most a quarter where TexGen wraps the weft's corner and ours turns on its spline)."""
     from xrayraster.weave import Sample
-    from xrayraster.weave.sweep import CubicSpline3
 
     cell = UnitCell(family="orthogonal", weft_layers=3, weft_per_layer=4, warp_positions=2)
     theirs = texgen_layer_to_layer(cell, (1, 1), resolution=24)
     sample = Sample(cell, cells=(1, 1))
-    box = math.prod(cell.size)
-    ours_fraction = sum(mesh.volume for _, mesh in sample.meshes()) / box
-    theirs_fraction = sum(mesh.volume for mesh in theirs.meshes) / box
-    assert abs(ours_fraction / theirs_fraction - 1) < 0.03
+    assert abs(_yarn_volume_ratio(sample, theirs) - 1) < 0.03
 
-    curves = {}
-    for yarn in sample.yarns():
-        if yarn.kind == "binder":
-            spline = CubicSpline3(yarn.nodes, yarn.end_tangents)
-            curves[round(float(yarn.nodes[0, 0]), 6)] = spline(np.linspace(0.0, spline.length_parameter, 10000))
+    curves = {round(float(yarn.nodes[0, 0]), 6): _curve(yarn, 10000) for yarn in sample.yarns() if yarn.kind == "binder"}
     lines = [line for line, kind in zip(theirs.centrelines, theirs.kinds) if kind == "binder"]
     assert len(lines) == len(curves) == cell.warp_positions
     for line in lines:
@@ -143,21 +135,13 @@ def test_a_2d_cell_matches_texgens(family):
     spline, within a tenth of a yarn's height (measured: plain 0.0007 mm RMS, 0.001 at most, for
     yarns 0.5 mm high)."""
     from xrayraster.weave import Sample
-    from xrayraster.weave.sweep import CubicSpline3
 
     cell = UnitCell(family=family, plies=1, warp_section="ellipse", weft_section="ellipse", thickness=1.2)
     theirs = texgen_weave_2d(cell)
     sample = Sample(cell, cells=(1, 1))
-    box = math.prod(cell.size)
-    ours_fraction = sum(mesh.volume for _, mesh in sample.meshes()) / box
-    theirs_fraction = sum(mesh.volume for mesh in theirs.meshes) / box
-    assert abs(ours_fraction / theirs_fraction - 1) < 0.03
-    curves = {}
-    for yarn in sample.yarns():
-        across = 1 if yarn.family == "weft" else 0
-        spline = CubicSpline3(yarn.nodes, yarn.end_tangents)
-        curves[(yarn.family, round(float(yarn.nodes[0, across]), 6))] = spline(np.linspace(0.0, spline.length_parameter,
-                                                                                          20000))
+    assert abs(_yarn_volume_ratio(sample, theirs) - 1) < 0.03
+    curves = {(yarn.family, round(float(yarn.nodes[0, 1 if yarn.family == "weft" else 0]), 6)): _curve(yarn, 20000)
+              for yarn in sample.yarns()}
     assert len(theirs.centrelines) == cell.warp_positions + cell.weft_per_layer
     for line, kind in zip(theirs.centrelines, theirs.kinds):
         along = 0 if kind == "weft" else 1
@@ -166,3 +150,16 @@ def test_a_2d_cell_matches_texgens(family):
         distance = np.min(np.linalg.norm(line[:, None, :] - ours[None, :, :], axis=2), axis=1)
         height = cell.weft_height if kind == "weft" else cell.warp_height
         assert distance.max() < 0.1 * height
+
+
+def _yarn_volume_ratio(sample, theirs) -> float:
+    """Our sample's yarn volume over TexGen's (the same cell, so the same box)."""
+    return sum(mesh.volume for _, mesh in sample.meshes()) / sum(mesh.volume for mesh in theirs.meshes)
+
+
+def _curve(yarn, points: int) -> np.ndarray:
+    """``points`` points along our yarn's centre line (its spline), end to end."""
+    from xrayraster.weave.sweep import CubicSpline3
+
+    spline = CubicSpline3(yarn.nodes, yarn.end_tangents)
+    return spline(np.linspace(0.0, spline.length_parameter, points))
