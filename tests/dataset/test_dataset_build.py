@@ -272,7 +272,8 @@ print(json.dumps(rss))
 
 def test_a_hundred_samples_in_one_worker_keep_its_memory_steady(gl, cl, tmp_path):
     """Resident memory after the 10th of 100 samples is within 10 % of that after the 100th (the
-    worker keeps its contexts; nothing grows with the samples it made)."""
+    worker keeps its contexts, hands its heap's free memory back after each sample; nothing grows
+    with the samples it made)."""
     path = tiny(tmp_path, count=100)
     path.write_text(path.read_text().replace('"geometry.num_views" = 20', '"geometry.num_views" = 8'))
     run = subprocess.run([sys.executable, "-c", SOAK, str(path), str(tmp_path / "out")], env=child_env(),

@@ -46,6 +46,7 @@ from pathlib import Path
 
 from ..core.errors import ConfigError, XrayrasterError, XrayrasterWarning
 from ..core.files import atomic_write_text
+from ..core.heap import hand_back_freed_memory
 from ..core.pictures import write_gallery
 from ..pipeline.scan import scan
 from ..pipeline.woven import weave
@@ -154,6 +155,8 @@ def build_sample(dataset: DatasetFile, root, index: int, threads: int | None = N
         Path(root), index, dataclasses.replace(result, metadata=_steady(result.metadata)), record,
         name=dataset.name, projections=result.projections, write_meshes=meshes)
     fractions = {names.get(k, "background" if k == "0" else k): v for k, v in stored["fractions"].items()}
+    del result, stored
+    hand_back_freed_memory()
     return {"index": index, "seed": drawn.seed, "seconds": time.perf_counter() - start, "fractions": fractions}
 
 
