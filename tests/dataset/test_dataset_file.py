@@ -71,6 +71,13 @@ def test_a_draw_is_a_scan_table_with_its_values_and_seed(dataset):
     assert again.geometry == d.scan.geometry
 
 
+def test_scatter_is_a_key_a_dataset_varies():
+    drawn = [draw(load_dataset_file(table(count=8, vary={"physics.scatter": {"choice": ["none", "kernel"]}})), i)
+             for i in range(8)]
+    assert {d.scan.realism.scatter for d in drawn} == {"none", "kernel"}
+    assert all(d.scan.realism.scatter == d.values["physics.scatter"] for d in drawn)
+
+
 def test_a_fixed_seed_is_kept():
     d = draw(load_dataset_file(table(vary={**VARY, "scan.seed": 7})), 0)
     assert d.table["scan"]["seed"] == 7 and d.table["weave"]["sample"]["seed"] == d.seed

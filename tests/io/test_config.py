@@ -254,7 +254,7 @@ material = "b"
 # ------------------------------------------------------------------ 6. unknown keys everywhere
 
 UNKNOWN = {
-    "top level": ("colour = 1\n" + CONE + BOX, r"scene\.toml: unknown key\(s\) colour; allowed: detector, geometry, materials, objects, source$"),
+    "top level": ("colour = 1\n" + CONE + BOX, r"scene\.toml: unknown key\(s\) colour; allowed: detector, geometry, materials, objects, physics, source$"),
     "geometry": (with_geometry("num_view = 4"), GEOMETRY_AT + r": unknown key\(s\) num_view; allowed: angles_deg, arc_deg, beam, "),
     "geometry subtable": (CONE + "[geometry.detector]\nrows = 4\n" + BOX, GEOMETRY_AT + r": unknown key\(s\) detector; allowed: "),
     "object": (with_object('colour = "red"'), BALL_AT + r": unknown key\(s\) colour; allowed: label, material, mesh, name, "),

@@ -521,4 +521,4 @@ def test_a_scan_reconstructs_the_mount_and_labels_only_the_sample(gl, cl, tmp_pa
     assert abs(result.volume.data[post_only].mean() / mu - 1) < 0.05
     assert result.metadata["mount"][0]["name"] == "post"
     assert result.metadata["realism"] == {"focal_spot_mm": 0.0, "focal_plane_mm": None, "flat_fields": None,
-                                          "gain_variation": 0.0}
+                                          "gain_variation": 0.0, "scatter": "none"}

@@ -550,6 +550,7 @@ def test_the_page_turns_paints_reports_errors_and_saves_what_render_renders(brow
     from selenium.webdriver.common.action_chains import ActionChains
     from selenium.webdriver.common.by import By
     from selenium.webdriver.common.keys import Keys
+    from selenium.webdriver.support.ui import Select
 
     import tifffile
 
@@ -598,7 +599,14 @@ def test_the_page_turns_paints_reports_errors_and_saves_what_render_renders(brow
         kv.clear()
         kv.send_keys("70", Keys.ENTER)
         wait_for(lambda: frames(browser) > count and not error.is_displayed(), "the frame at 70 kV")
+        _, primary = shown(browser)
+
+        # Scatter picked from its list: it adds signal behind the sample, so its line integrals fall.
+        count = frames(browser)
+        Select(browser.find_element(By.CSS_SELECTOR, "select[data-key='physics.scatter']")).select_by_value("kernel")
+        wait_for(lambda: frames(browser) > count, "the frame with scatter")
         header, final = shown(browser)
+        assert final.sum() < primary.sum() and (final <= primary + 1e-6).all()
         browser.find_element(By.ID, "save-settings").click()
         saved = wait_for(lambda: (tmp_path / "settings.toml").exists() and tmp_path / "settings.toml", "the download")
         time.sleep(0.2)  # Chromium renames the finished download into place
@@ -708,3 +716,16 @@ def test_a_weave_shows_the_sliders_of_its_family(tmp_path, family, shown, hidden
     assert all(got[key] == getattr(loaded.weave.sample.cell, key.split(".")[-1]) for key in shown)
     if family == "satin":  # its harness, left to the family: the pattern's size
         assert got["weave.harness"] == len(loaded.weave.sample.cell.pattern) == 5
+
+
+def test_scatter_is_a_list_to_pick_from_at_the_files_value(tmp_path):
+    from xrayraster.preview.controls import controls
+    from xrayraster.preview.document import Document
+
+    small = (Path(__file__).resolve().parents[2] / "examples" / "scan_small.toml").read_text()
+    path = tmp_path / "scan.toml"
+    for text, value in (("[weave]\n", "none"), (small + '\n[physics]\nscatter = "kernel"\n', "kernel")):
+        path.write_text(text)
+        document = Document.open(path)
+        control = next(c for c in controls(document, document.load()) if c["key"] == "physics.scatter")
+        assert control["kind"] == "choice" and control["choices"] == ["none", "kernel"] and control["value"] == value

@@ -10,6 +10,7 @@ BEAMS = ("cone", "parallel")
 OVERLAP_MODES = ("auto", "sum", "nested", "resolve")  # path lengths where objects overlap
 RADIOGRAPH_OUTPUTS = ("raw", "transmission", "lineint")  # what a radiograph holds
 DETECTOR_MODES = ("integrating", "counting")
+SCATTER_MODELS = ("none", "kernel")  # [physics] scatter: physics/scatter.py
 RECONSTRUCTION_INPUTS = ("lineint", "transmission")  # what a projection stack handed to FDK holds
 FILTERS = ("ram-lak", "shepp-logan", "cosine", "hamming", "hann")  # ramp-filter windows
 SCAN_KINDS = ("auto", "full", "short")  # FDK redundancy weighting

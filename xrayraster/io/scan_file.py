@@ -57,7 +57,8 @@ from .weave_file import WeaveFile, framing_geometry, sample_grid, weave_from_dic
 __all__ = ["SCAN_TABLES", "ScanFile", "ScanOptions", "load_scan_file", "mesh_resolution_for"]
 
 #: The tables a scan file may hold (a dataset file holds them too, inline: dataset/dataset_file.py).
-SCAN_TABLES = {"geometry", "objects", "weave", "mount", "materials", "source", "detector", "volume", "scan", "pose"}
+SCAN_TABLES = {"geometry", "objects", "weave", "mount", "materials", "source", "detector", "physics", "volume", "scan",
+               "pose"}
 
 
 @dataclass(frozen=True)

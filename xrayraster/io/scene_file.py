@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core import fields
-from ..core.choices import DETECTOR_MODES
+from ..core.choices import DETECTOR_MODES, SCATTER_MODELS
 from ..core.errors import (
     ConfigError,
     MaterialError,
@@ -74,6 +74,8 @@ SOURCE_KINDS = {
 #: The ``[source]`` keys of the scanner's imperfections, allowed with any source kind.
 SOURCE_REALISM_KEYS = {"focal_spot_mm", "focal_plane_mm"}
 _DETECTOR_REALISM_KEYS = {"flat_fields", "gain_variation"}
+#: The keys of the ``[physics]`` table: what the simulation models beyond the primary beam.
+PHYSICS_KEYS = {"scatter"}
 #: The keys of the ``[detector]`` table.
 DETECTOR_KEYS = {"mode", "scintillator", "scintillator_mm", "blur_sigma_px", "psf", "electronic_noise", "dark",
                  *_DETECTOR_REALISM_KEYS}
@@ -104,7 +106,7 @@ def load_scene_file(source, *, where: str = "scene table", base_dir=None,
     else:
         path = Path(source)
         data, base = read_toml(path, "scene file"), path.parent
-    fields.only(data, {"geometry", "objects", "materials", "source", "detector"}, f"{path}")
+    fields.only(data, {"geometry", "objects", "materials", "source", "detector", "physics"}, f"{path}")
     if "geometry" not in data:
         raise ConfigError(f"{path}: missing [geometry] table")
     if not isinstance(data["geometry"], dict):
@@ -383,8 +385,11 @@ def _psf(value, where: str) -> tuple:
 
 def parse_realism(data: dict, geometry, path: Path) -> Realism:
     """The scanner's imperfections (docs/realism.md) from ``[source]`` (``focal_spot_mm``,
-    ``focal_plane_mm``) and ``[detector]`` (``flat_fields``, ``gain_variation``); all off by default."""
+    ``focal_plane_mm``), ``[detector]`` (``flat_fields``, ``gain_variation``) and ``[physics]``
+    (``scatter``); all off by default."""
     source, detector = data.get("source", {}), data.get("detector", {})
+    physics = fields.table(data.get("physics", {}), "physics", f"{path}")
+    fields.only(physics, PHYSICS_KEYS, f"{path} [physics]")
     where_source, where_detector = f"{path} [source]", f"{path} [detector]"
     options = {}
     if "focal_spot_mm" in source:
@@ -406,4 +411,6 @@ def parse_realism(data: dict, geometry, path: Path) -> Realism:
     if "gain_variation" in detector:
         options["gain_variation"] = fields.number(detector["gain_variation"], "gain_variation", where_detector,
                                                   nonnegative=True)
+    if "scatter" in physics:
+        options["scatter"] = fields.choice(physics["scatter"], "scatter", f"{path} [physics]", SCATTER_MODELS)
     return Realism(**options)

@@ -164,7 +164,7 @@ TABLE_BLOCK_BINS = 4
 
 
 def sampled_signal(lengths, mu, photons, efficiency, energies, factor, counting: bool, rng,
-                   threads: int | None = None, table: SpectralTable | None = None) -> np.ndarray:
+                   threads: int | None = None, table: SpectralTable | None = None, extra=None) -> np.ndarray:
     """One noisy realisation ``(rows, cols)`` float64 of the detected signal.
 
     Counting: Poisson(Σ_b η_b n_b), one draw per pixel (a sum of independent Poisson variables
@@ -172,14 +172,17 @@ def sampled_signal(lengths, mu, photons, efficiency, energies, factor, counting:
     fewer than :data:`EXACT_BELOW_PHOTONS` photons, else as a Gaussian with the same mean
     Σ E η n and variance Σ E² η n. ``table``: the sums over bins interpolated instead
     (:mod:`~xrayraster.physics.spectral_table`, built for these ``mu``, photons, efficiency and
-    energies), except in the pixels it does not cover and those drawn bin by bin.
+    energies), except in the pixels it does not cover and those drawn bin by bin. ``extra``: the mean
+    and variance ``(rows, cols)`` of a signal from other photons (scatter) drawn with it: in the
+    Gaussian's moments, and as :func:`scaled_poisson` where the primary is
+    drawn bin by bin (a counting detector's variance is its mean).
     """
     lengths, mu, photons = _check(lengths, mu, photons)
     efficiency = np.asarray(efficiency, dtype=np.float64)
     energies = np.asarray(energies, dtype=np.float64)
     if counting and table is None:
         mean = expected_signal(lengths, mu, photons, efficiency, factor, threads)
-        return rng.poisson(mean).astype(np.float64)
+        return rng.poisson(mean if extra is None else mean + extra[0]).astype(np.float64)
     factor = np.broadcast_to(np.asarray(factor, dtype=np.float64), lengths.shape[1:])
     out = np.empty(lengths.shape[1:])
     cols = lengths.shape[2]
@@ -205,14 +208,37 @@ def sampled_signal(lengths, mu, photons, efficiency, energies, factor, counting:
     blocks = _row_blocks(mu.shape[1] if table is None else TABLE_BLOCK_BINS, *lengths.shape[1:])
     for rows, (mean, spread, few, detected_few) in zip(blocks, _in_order(moments, blocks, threads)):
         if counting:  # with a table only
-            out[rows] = rng.poisson(mean)
+            out[rows] = rng.poisson(mean if extra is None else mean + extra[0][rows])
             continue
+        if extra is not None:
+            mean = mean + extra[0][rows]
+            spread = np.sqrt(spread * spread + extra[1][rows])
         chunk = rng.standard_normal(mean.shape)  # mean + spread·z, in place
         chunk *= spread
         chunk += mean
         if few.any():
             chunk[few] = energies @ rng.poisson(detected_few)
+            if extra is not None:
+                chunk[few] += scaled_poisson(extra[0][rows][few], extra[1][rows][few], rng)
         out[rows] = chunk
+    return out
+
+
+def scaled_poisson(mean: np.ndarray, variance: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """A non-negative signal with this ``mean`` and ``variance`` per pixel: q · Poisson(mean / q), q =
+    variance / mean the mean signal per detected photon (a compound Poisson signal with its first two
+    moments exact; 0 where the mean is 0). Where a pixel expects at least
+    :data:`EXACT_BELOW_PHOTONS` photons, the Gaussian of the same
+    two moments, as the spectral sum draws them (a third of the time of numpy's Poisson there)."""
+    quantum = np.divide(variance, mean, out=np.ones_like(mean), where=mean > 0)
+    counts = mean / quantum
+    many = counts >= EXACT_BELOW_PHOTONS
+    if not many.any():
+        return quantum * rng.poisson(counts)
+    out = mean + np.sqrt(variance) * rng.standard_normal(mean.shape)
+    few = ~many
+    if few.any():
+        out[few] = quantum[few] * rng.poisson(counts[few])
     return out
 
 

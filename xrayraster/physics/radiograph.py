@@ -16,8 +16,9 @@ import numpy as np
 from ..core.choices import RADIOGRAPH_OUTPUTS, check_choice
 from ..core.errors import PhysicsError
 from . import beer_lambert
+from .beer_lambert import scaled_poisson
 from .detector import Detector, gaussian_blur, negligible_blur
-from .realism import scaled_poisson
+from .scatter import ScatterModel, scatter_signal
 from .spectral_table import SpectralTable, moment_weights, spectral_table
 
 
@@ -30,6 +31,8 @@ class Radiograph:
     dropped: float  # share of the open-beam signal in the bins dropped (0 when none were)
     covered: int  # pixels whose ray crosses the scene (a non-zero path length): the sample's share of the view
     starved_covered: int  # the starved pixels among them (physics/starvation.py)
+    spr_centre: float = 0.0  # scatter over primary signal in the detector's middle pixels (0 without scatter)
+    spr_covered: float = 0.0  # the same over the pixels the scene covers
 
 
 def attenuation_table(materials, energies_kev) -> np.ndarray:
@@ -84,7 +87,8 @@ def spectral_model(materials, spectrum, detector: Detector, *, bin_tolerance: fl
 
 def radiograph(lengths, materials, spectrum, detector: Detector, factor, *, output="lineint", noise=False, rng=None,
                bin_tolerance: float = BIN_TOLERANCE, threads: int | None = None, focal_sigma_px=(0.0, 0.0),
-               gain=None, flat_noise=None, model: SpectralModel | None = None) -> Radiograph:
+               gain=None, flat_noise=None, model: SpectralModel | None = None,
+               scatter: ScatterModel | None = None) -> Radiograph:
     """The radiograph of one view.
 
     ``lengths``: ``(channels, rows, cols)`` mm, channels in ``materials`` order; ``spectrum``:
@@ -99,7 +103,9 @@ def radiograph(lengths, materials, spectrum, detector: Detector, factor, *, outp
     narrower than :data:`~xrayraster.physics.detector.NEGLIGIBLE_BLUR_PX` along an axis is skipped
     there, and with both axes skipped the view is exactly the view without a spot. ``model``:
     the bins, μ and spectral table of :func:`spectral_model` for these materials, spectrum and
-    detector (made here when None, without a table), so the views of a scan share them.
+    detector (made here when None, without a table), so the views of a scan share them. ``scatter``:
+    the scan's scatter kernels (:func:`~xrayraster.physics.scatter.scatter_model`), whose scatter is
+    added to the primary before its noise; None: no scatter.
     """
     check_choice(output, RADIOGRAPH_OUTPUTS, "output", PhysicsError)
     if noise and rng is None:
@@ -107,14 +113,19 @@ def radiograph(lengths, materials, spectrum, detector: Detector, factor, *, outp
     model = model or spectral_model(materials, spectrum, detector, bin_tolerance=bin_tolerance)
     energies, photons, dropped, mu = model.energies, model.photons, model.dropped, model.mu
     focal_sigma_px = applied_focal_sigma_px(focal_sigma_px)
+    scattered = None if scatter is None else scatter_signal(scatter, lengths, mu, photons, factor)
+    extra = None if scattered is None else (scattered, scattered * scatter.quantum)
     quantum = _detected(lengths, mu, photons, energies, detector, factor, focal_sigma_px, rng if noise else None,
-                        threads, model.table)
-    raw = detector.read_out(quantum, rng if noise else None, gain=gain)
+                        threads, model.table, extra)
     # The path lengths are at hand, so the pixels the scene covers are counted here, per view, for
     # the share of them that starve (a grazing ray's tiny path counts: it is still the sample's).
     covered = np.any(np.asarray(lengths) != 0, axis=0)
+    ratios = {}
+    if scattered is not None:
+        ratios = _scatter_ratios(scattered, quantum, covered, lengths, model, detector.weights(energies), factor)
+    raw = detector.read_out(quantum, rng if noise else None, gain=gain)
     if output == "raw":
-        return Radiograph(raw.astype(np.float32), output, 0, len(energies), dropped, int(covered.sum()), 0)
+        return Radiograph(raw.astype(np.float32), output, 0, len(energies), dropped, int(covered.sum()), 0, **ratios)
     flat = _exact_flat(photons, energies, detector, factor, raw.shape, focal_sigma_px)
     if flat_noise is not None:
         flat = detector.dark + (flat - detector.dark) * flat_noise
@@ -128,7 +139,21 @@ def radiograph(lengths, materials, spectrum, detector: Detector, factor, *, outp
         # photon-starved as a clamped pixel (its −log is infinite), so it is counted with them.
         starved = starved | (image == 0)
     return Radiograph(image, output, int(starved.sum()), len(energies), dropped, int(covered.sum()),
-                      int(np.count_nonzero(starved & covered)))
+                      int(np.count_nonzero(starved & covered)), **ratios)
+
+
+def _scatter_ratios(scattered, detected, covered, lengths, model: SpectralModel, weights, factor) -> dict:
+    """The view's scatter-to-primary ratios: in the detector's middle pixels (one, or the two or four
+    around the centre), against their exact primary, and over the pixels the scene covers, against
+    their summed primary (the ``detected`` signal, noisy or not, less the scatter: a sum over many
+    pixels)."""
+    rows, cols = scattered.shape
+    middle = (slice((rows - 1) // 2, rows // 2 + 1), slice((cols - 1) // 2, cols // 2 + 1))
+    exact = beer_lambert.expected_signal(np.asarray(lengths)[(slice(None), *middle)], model.mu, model.photons, weights,
+                                         np.broadcast_to(factor, scattered.shape)[middle], threads=1)
+    behind = detected[covered].sum() - scattered[covered].sum()
+    return {"spr_centre": float(scattered[middle].sum() / exact.sum()),
+            "spr_covered": float(scattered[covered].sum() / behind) if behind > 0 else 0.0}
 
 
 def flat_noise(spectrum, detector: Detector, factor, shape: tuple[int, int], frames: int, rng, *,
@@ -167,27 +192,30 @@ def _bins(spectrum, detector: Detector, bin_tolerance: float) -> tuple[np.ndarra
 
 
 def _detected(lengths, mu, photons, energies, detector: Detector, factor, focal_sigma_px, rng, threads,
-              table: SpectralTable | None) -> np.ndarray:
+              table: SpectralTable | None, extra=None) -> np.ndarray:
     """The detected signal before read-out: expected (``rng`` None) or one noisy realisation, its
     sums over bins interpolated from ``table`` where there is one (noisy views without a focal spot).
+    ``extra``: the mean and variance of the scatter's signal, added to the primary's and drawn with it.
 
     A focal spot blurs the transmitted intensity before its photons are counted, so the blurred
     mean (and, integrating, the blurred variance Σ E²·η·n) is drawn from: a Poisson count (counting)
-    or :func:`~xrayraster.physics.realism.scaled_poisson`. Without one, Beer–Lambert's own sampling.
+    or :func:`~xrayraster.physics.beer_lambert.scaled_poisson`. Without one, Beer–Lambert's own sampling.
     """
     weights = detector.weights(energies)
+    extra_mean, extra_variance = (0.0, 0.0) if extra is None else extra
     if not any(focal_sigma_px):
         if rng is None:
-            return beer_lambert.expected_signal(lengths, mu, photons, weights, factor, threads)
+            return beer_lambert.expected_signal(lengths, mu, photons, weights, factor, threads) + extra_mean
         return beer_lambert.sampled_signal(lengths, mu, photons, detector.efficiency(energies), energies, factor,
-                                           detector.counting, rng, threads, table)
+                                           detector.counting, rng, threads, table, extra)
     mean = _focal_blur(beer_lambert.expected_signal(lengths, mu, photons, weights, factor, threads), *focal_sigma_px)
+    mean += extra_mean
     if rng is None:
         return mean
     if detector.counting:
         return rng.poisson(mean).astype(np.float64)
     variance = beer_lambert.expected_signal(lengths, mu, photons, energies * weights, factor, threads)
-    return scaled_poisson(mean, _focal_blur(variance, *focal_sigma_px), rng)
+    return scaled_poisson(mean, _focal_blur(variance, *focal_sigma_px) + extra_variance, rng)
 
 
 def _focal_blur(image: np.ndarray, sigma_rows_px: float, sigma_cols_px: float) -> np.ndarray:

@@ -10,6 +10,8 @@
 * **Gain variation** (``gain_variation = σ``): a fixed per-pixel gain map g, mean 1 and relative
   standard deviation σ, multiplies the signal and is not corrected by the (gain-free) flat: each line
   integral gains −ln g(p), the same in every view, which reconstructs as rings.
+* **Scatter** (``scatter = "kernel"``): the photons the sample scatters onto the detector, added to
+  each view's primary before its noise (:mod:`~xrayraster.physics.scatter`).
 
 The two fixed patterns (the flat's noise and the gain map) are drawn once per scan from the scan's
 seed, on streams of their own (:func:`calibration_rng`) apart from the views' noise streams.
@@ -23,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core.choices import SCATTER_MODELS, check_choice
 from ..core.errors import PhysicsError
 from ..core.geometry import as_vector_geometry
 
@@ -43,14 +46,17 @@ class Realism:
       blur, mm; None: the rotation axis (the plane through the origin parallel to the detector).
     * ``flat_fields``: number of noisy flats averaged into the scan's flat; None: the exact flat.
     * ``gain_variation``: relative standard deviation of the per-pixel gain (0: uniform gain).
+    * ``scatter``: the scatter model, ``"none"`` or ``"kernel"`` (:mod:`~xrayraster.physics.scatter`).
     """
 
     focal_spot_mm: float = 0.0
     focal_plane_mm: float | None = None
     flat_fields: int | None = None
     gain_variation: float = 0.0
+    scatter: str = "none"
 
     def __post_init__(self):
+        check_choice(self.scatter, SCATTER_MODELS, "realism scatter", PhysicsError)
         for name in ("focal_spot_mm", "gain_variation"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
@@ -115,11 +121,3 @@ def gain_map(sigma: float, shape: tuple[int, int], rng: np.random.Generator) -> 
     """
     s2 = math.log1p(sigma * sigma)
     return np.exp(rng.normal(-s2 / 2, math.sqrt(s2), shape))
-
-
-def scaled_poisson(mean: np.ndarray, variance: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """A non-negative signal with this ``mean`` and ``variance`` per pixel: q · Poisson(mean / q), q =
-    variance / mean the mean signal per detected photon (a compound Poisson signal with its first two
-    moments exact; 0 where the mean is 0)."""
-    quantum = np.divide(variance, mean, out=np.ones_like(mean), where=mean > 0)
-    return quantum * rng.poisson(mean / quantum)

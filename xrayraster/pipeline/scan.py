@@ -60,7 +60,8 @@ STAGES = ("sample", "projections", "fdk", "labels")
 RECONSTRUCTION_FACTS = ("method", "filter", "scan", "displaced", "truncation", "truncation_width",
                         "truncation_corrected_row_ends")
 # Per-view lists of Renderer.project_all's provenance, joined across batches.
-_PER_VIEW = ("views", "bins_used", "dropped_signal_share", "starved_pixels", "covered_pixels", "starved_covered_pixels")
+_PER_VIEW = ("views", "bins_used", "dropped_signal_share", "starved_pixels", "covered_pixels", "starved_covered_pixels",
+             "spr_centre", "spr_covered")
 
 
 @dataclass(frozen=True)
@@ -198,7 +199,8 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False, a
                         "covered_pixels": sum(provenance["covered_pixels"]),
                         "starved_covered_pixels": sum(provenance["starved_covered_pixels"]),
                         "starved_share": starved,
-                        "spectral_table": provenance.get("spectral_table")},
+                        "spectral_table": provenance.get("spectral_table"),
+                        **_scatter_report(provenance)},
         "reconstruction": {key: volume.provenance[key] for key in RECONSTRUCTION_FACTS},
         "realism": loaded.realism.to_dict(),
         "pose": loaded.pose.to_dict(),
@@ -346,9 +348,20 @@ def _progress(progress, total: int):
     return (lambda done, _: None), None
 
 
+def _scatter_report(provenance: dict) -> dict:
+    """With scatter, its scatter-to-primary ratios over the views: at the detector's centre (mean and
+    largest) and over the pixels the sample covers (mean)."""
+    if "spr_centre" not in provenance:
+        return {}
+    centre, covered = provenance["spr_centre"], provenance["spr_covered"]
+    return {"scatter_to_primary": {"centre_mean": float(np.mean(centre)), "centre_max": float(np.max(centre)),
+                                   "covered_mean": float(np.mean(covered))}}
+
+
 def _joined(provenances: list[dict]) -> dict:
     """The batches' provenance as one stack's: per-view lists joined, the rest from the first."""
-    return {**provenances[0], **{key: [value for p in provenances for value in p[key]] for key in _PER_VIEW}}
+    return {**provenances[0], **{key: [value for p in provenances for value in p[key]] for key in _PER_VIEW
+                                 if key in provenances[0]}}
 
 
 @contextmanager

@@ -6,6 +6,7 @@ and refused with the loader's message when it is wrong)."""
 
 from __future__ import annotations
 
+from ..core.choices import SCATTER_MODELS
 from ..weave.families import FAMILIES, FAMILY_FIELDS
 from .document import Document
 
@@ -18,6 +19,10 @@ _SCANNER = (
     ("source.focal_spot_mm", "focal spot", "mm", "number", 0.0, 1.0, 0.001),
     ("detector.blur_sigma_px", "detector blur σ", "px", "number", 0.0, 5.0, 0.05),
     ("detector.gain_variation", "gain variation (rings)", "share", "number", 0.0, 0.1, 0.001),
+)
+# key, label, the choices: a list to pick from
+_CHOICES = (
+    ("physics.scatter", "scatter", SCATTER_MODELS),
 )
 _WEAVE = (
     ("weave.sample.seed", "distortion seed", "", "integer", 0, 100000, 1),
@@ -47,6 +52,10 @@ def controls(document: Document, loaded) -> list[dict]:
             continue  # a monochromatic or tabulated source has no tube
         value = table.get(section, {}).get(name, _default(loaded, key))
         out.append(_control(key, label, unit, kind, lo, hi, step, value))
+    for key, label, choices in _CHOICES:
+        section, name = key.split(".")
+        out.append({"key": key, "label": label, "unit": "", "kind": "choice", "choices": list(choices),
+                    "value": table.get(section, {}).get(name, _default(loaded, key))})
     filters = table.get("source", {}).get("filters", {}) if "kvp" in table.get("source", {}) else None
     for material in (filters or ({"Al": 0.0} if filters is not None else {})):
         out.append(_control(f"source.filters.{material}", f"{material} filter", "mm", "number", 0.0, 10.0, 0.05,
@@ -76,6 +85,7 @@ def _default(loaded, key: str):
         "source.mas": 1.0,
         "detector.blur_sigma_px": 0.0 if detector is None else detector.blur_sigma_px,
         "detector.gain_variation": realism.gain_variation,
+        "physics.scatter": realism.scatter,
     }.get(key)
 
 

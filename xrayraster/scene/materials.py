@@ -363,6 +363,45 @@ class Material:
         """The same as :meth:`attenuation_per_mm`: μ in mm⁻¹."""
         return self.attenuation_per_mm(energies_kev)
 
+    def scattering_per_mm(self, energies_kev) -> tuple[np.ndarray, np.ndarray]:
+        """The Compton (incoherent) and Rayleigh (coherent) parts of μ, mm⁻¹, each shaped as
+        ``energies_kev``: xraylib's ``CS_Compt`` and ``CS_Rayl`` mixed by mass fraction."""
+        e = _check_energies(energies_kev)
+        parts = (_by_element(self, name, e.reshape(-1)) for name in ("CS_Compt", "CS_Rayl"))
+        return tuple(part.reshape(e.shape) * (self.density / 10.0) for part in parts)
+
+    def scattering_per_mm_sr(self, energies_kev, theta_rad) -> tuple[np.ndarray, np.ndarray]:
+        """The Compton and Rayleigh differential attenuation dμ/dΩ, mm⁻¹ sr⁻¹, ``(energies,
+        angles)`` float64: xraylib's ``DCS_Compt`` (Klein–Nishina with the incoherent scattering
+        function) and ``DCS_Rayl`` (Thomson with the atomic form factor) mixed by mass fraction, at
+        polar scattering angles ``theta_rad``."""
+        e = _check_energies(energies_kev).reshape(-1)
+        theta = np.ascontiguousarray(theta_rad, dtype=np.float64).reshape(-1)
+        return tuple(_by_element(self, name, e, theta) * (self.density / 10.0) for name in ("DCS_Compt", "DCS_Rayl"))
+
+
+def _by_element(material: Material, function: str, energies: np.ndarray, *angles: np.ndarray) -> np.ndarray:
+    """xraylib's per-element ``function`` (a cross section, cm²/g, or a differential one, cm²/g/sr,
+    given ``angles``) at every energy (and angle), mixed by the material's mass fractions."""
+    zs = np.array([z for z, _ in material.composition], dtype=np.int64)
+    ws = np.array([w for _, w in material.composition], dtype=np.float64)
+    if _xraylib_np is not None:
+        table = getattr(_xraylib_np, function)(zs, np.ascontiguousarray(energies, dtype=np.float64), *angles)
+    else:  # pragma: no cover - scalar fallback
+        scalar = getattr(xraylib, function)
+        grid = np.stack(np.meshgrid(energies, *angles, indexing="ij"), axis=-1).reshape(-1, 1 + len(angles))
+        table = np.array([[_or_zero(scalar, int(z), *map(float, point)) for point in grid] for z in zs])
+        table = table.reshape(len(zs), len(energies), *(len(a) for a in angles))
+    return np.tensordot(ws, table, axes=1)
+
+
+def _or_zero(function, *args) -> float:
+    """``function(*args)``, 0 where xraylib's tables do not reach (the smallest momentum transfers)."""
+    try:
+        return function(*args)
+    except ValueError:
+        return 0.0
+
 
 @lru_cache(maxsize=None)
 def _library_material(key: str) -> Material:

@@ -21,6 +21,7 @@ from ..physics.beer_lambert import pixel_photon_factor, thread_count
 from ..physics.detector import NEGLIGIBLE_BLUR_PX, Detector, blur_change_bound, negligible_blur
 from ..physics.radiograph import Radiograph, SpectralModel, flat_noise, radiograph, spectral_model
 from ..physics.realism import FLAT_TAG, GAIN_TAG, Realism, calibration_rng, focal_sigma_px, gain_map
+from ..physics.scatter import ScatterModel, detector_layout, scatter_model
 from ..scene.scene import Scene
 from .estimate import RenderJob
 
@@ -38,6 +39,7 @@ class Renderer(PathLengthRenderer):
         self.threads = thread_count(threads)  # checked before a GL context is made
         self._calibration = None  # (key, gain map, flat noise) of the last scan projected: see _fixed_patterns
         self._model = None  # (key, SpectralModel) of the last scene projected: see _spectral_model
+        self._scatter = None  # (key, ScatterModel) of the last scene projected with scatter: see _scatter_model
         self.last_seconds: dict[str, float] = {}  # the last project()'s GL path lengths and CPU physics, s
         self._skips_logged: set = set()  # the negligible options already logged for this scan: see _log_skip
         super().__init__(geometry, **options)
@@ -87,6 +89,7 @@ class Renderer(PathLengthRenderer):
             self._log_skip(("blur_sigma_px", sigma), f"detector blur_sigma_px = {sigma:g}", blur_change_bound(sigma, sigma))
         gain, flat = self._fixed_patterns(spectrum, detector, realism, seed)
         model = self._spectral_model(scene, spectrum, detector, spectral_table and noise)
+        scatter = self._scatter_model(scene, model, detector) if realism.scatter == "kernel" else None
         materials, views = scene.materials, self.vector_geometry.num_views
 
         def physics(view: int, lengths: np.ndarray) -> Radiograph:
@@ -95,7 +98,7 @@ class Renderer(PathLengthRenderer):
             return radiograph(lengths, materials, spectrum, detector, pixel_photon_factor(self.vector_geometry, view),
                               output=output, noise=noise, rng=rng, threads=threads,
                               focal_sigma_px=self._focal_sigma_px(realism, view), gain=gain, flat_noise=flat,
-                              model=model)
+                              model=model, scatter=scatter)
 
         return physics
 
@@ -115,6 +118,16 @@ class Renderer(PathLengthRenderer):
             longest = float(np.linalg.norm(np.ptp(scene.bounds, axis=0))) if table else None
             self._model = (key, spectral_model(scene.materials, spectrum, detector, longest_mm=longest))
         return self._model[1]
+
+    def _scatter_model(self, scene: Scene, model: SpectralModel, detector: Detector) -> ScatterModel:
+        """The scatter kernels of the scene's materials under the model's bins, kept for the next view
+        of the same scene, spectrum, detector and geometry (a circular scan's views share its detector's
+        distance from the axis; view 0's is taken)."""
+        layout = detector_layout(self.vector_geometry, 0)
+        key = (model, detector, layout)
+        if self._scatter is None or self._scatter[0] != key:
+            self._scatter = (key, scatter_model(scene.materials, model.energies, model.photons, detector, layout))
+        return self._scatter[1]
 
     def _focal_sigma_px(self, realism: Realism, view: int) -> tuple[float, float]:
         """The focal spot's penumbra σ ``(rows, cols)`` in pixels for ``view``; the physics skips an axis
@@ -191,7 +204,9 @@ class Renderer(PathLengthRenderer):
         spectrum, detector, seed and per-view bins, dropped signal, starved pixels, the pixels the
         scene covers and the starved ones among them (physics/starvation.py), as the
         command line writes them, the realism options when any is on, and the spectral table's grid
-        and measured error when one was used. ``progress`` as in :meth:`path_lengths_all`.
+        and measured error when one was used, and with scatter each view's scatter-to-primary ratios
+        (``spr_centre``, ``spr_covered``: :class:`~xrayraster.physics.radiograph.Radiograph`).
+        ``progress`` as in :meth:`path_lengths_all`.
         """
         views = self._views(views)
         self._check_stack(scene, views, 1)
@@ -218,6 +233,9 @@ class Renderer(PathLengthRenderer):
         unit = "1" if output != "raw" else "counts" if detector.counting else "keV deposited"
         # An ideal scan's provenance stays as it was before the realism options existed.
         extra = {"realism": realism.to_dict()} if realism.active else {}
+        if realism.scatter != "none":
+            extra["spr_centre"] = [shot.spr_centre for shot in shots]
+            extra["spr_covered"] = [shot.spr_covered for shot in shots]
         table = self._model[1].table if spectral_table and noise else None
         if table is not None:
             extra["spectral_table"] = {"grid": list(table.shape), "error": table.error}

@@ -248,6 +248,16 @@ function hello(message) {
     const label = document.createElement("label");
     label.textContent = `${c.label} `;
     if (c.unit) { const u = document.createElement("span"); u.className = "unit"; u.textContent = c.unit; label.append(u); }
+    if (c.kind === "choice") {
+      const select = document.createElement("select");
+      select.dataset.key = c.key;
+      select.innerHTML = c.choices.map((v) => `<option value="${v}">${v}</option>`).join("");
+      select.value = c.value;
+      select.addEventListener("change", () => { state.edits[c.key] = select.value; send(); });
+      label.append(select);
+      $("controls").append(label);
+      continue;
+    }
     const slider = Object.assign(document.createElement("input"), { type: "range", min: c.min, max: c.max, step: c.step });
     const number = Object.assign(document.createElement("input"), { type: "number", step: c.step });
     number.dataset.key = slider.dataset.key = c.key;
