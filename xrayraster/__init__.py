@@ -37,7 +37,7 @@ _HOMES = {
     ".physics.radiograph": ("Radiograph",),
     ".physics.realism": ("Realism",),
     ".physics.spectrum": ("Spectrum",),
-    ".pipeline": ("Comparison", "ScanResult", "WeaveResult", "compare", "scan"),
+    ".pipeline": ("Comparison", "FitResult", "ScanResult", "WeaveResult", "compare", "fit", "scan"),
     ".recon.fdk": ("FDKStream", "Volume", "fdk"),
     ".recon.opencl": ("CLContext",),
     ".scene.materials": ("Material",),

@@ -71,6 +71,20 @@ def test_a_draw_is_a_scan_table_with_its_values_and_seed(dataset):
     assert again.geometry == d.scan.geometry
 
 
+def test_around_is_the_bases_value_plus_or_minus_a_share():
+    """{ around = r }: uniform over v(1 ± r) of the base's value (a fitted scan file's, docs/fit.md)."""
+    dataset = load_dataset_file(table(count=200, vary={"geometry.source_to_origin": {"around": 0.1},
+                                                       "source.photons_per_mm2_at_1m": {"around": 0.5}}))
+    values = np.array([draw(dataset, i).values["geometry.source_to_origin"] for i in range(200)])
+    assert 31.5 <= values.min() < 32.0 and 38.0 < values.max() <= 38.5  # 35 ± 3.5
+    assert dataset.vary["source.photons_per_mm2_at_1m"] == Uniform(0.5e7, 1.5e7)
+    for vary, message in [({"source.kvp": {"around": 0.1}}, "needs a non-zero number for 'source.kvp' in the base"),
+                          ({"geometry.num_views": {"around": 1.5}}, "below 1"),
+                          ({"geometry.num_views": {"around": 0.1, "clip": [1, 2]}}, "takes no other keys")]:
+        with pytest.raises(ConfigError, match=message):
+            load_dataset_file(table(vary=vary))
+
+
 def test_scatter_is_a_key_a_dataset_varies():
     drawn = [draw(load_dataset_file(table(count=8, vary={"physics.scatter": {"choice": ["none", "kernel"]}})), i)
              for i in range(8)]

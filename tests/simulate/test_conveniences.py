@@ -76,6 +76,27 @@ def test_project_all_defaults_to_every_view_and_equals_project(renderer, scene):
     json.dumps(p.metadata())  # every provenance value is JSON-ready
 
 
+def test_project_lengths_is_project_all_without_the_gl(renderer, scene):
+    """The physics of kept path lengths, as a fit runs it: every byte and the provenance of project_all,
+    for the scene with its materials replaced too (same meshes, same channels)."""
+    from xrayraster.physics.realism import Realism
+
+    tube = xr.Spectrum.from_tube(60.0)
+    realism = Realism(gain_variation=0.01, scatter="kernel")
+    lengths = renderer.path_lengths_all(scene, progress=False)
+    denser = scene.with_materials({AL: xr.Material(AL.name, AL.composition, AL.density * 1.1)})
+    assert [o.mesh for o in denser.objects] == [o.mesh for o in scene.objects] and len(denser.materials) == 2
+    for case in (scene, denser):
+        want = renderer.project_all(case, tube, noise=True, seed=3, realism=realism, spectral_table=True, progress=False)
+        got = renderer.project_lengths(case, lengths, tube, noise=True, seed=3, realism=realism, spectral_table=True)
+        np.testing.assert_array_equal(got.data, want.data)
+        assert got.provenance == want.provenance
+    with pytest.raises(xr.XrayrasterError, match="path lengths of the scene's 2 materials"):
+        renderer.project_lengths(scene, renderer.project_all(scene, MONO, progress=False), MONO)
+    with pytest.raises(xr.XrayrasterError, match="two materials became one"):
+        scene.with_materials({STEEL: AL})
+
+
 @pytest.mark.parametrize("workers", [1, 3])
 def test_project_all_overlaps_the_physics_and_keeps_every_byte(renderer, scene, monkeypatch, workers):
     """The physics of view k runs on a thread (``workers`` of them, as beside a GPU) while the GL

@@ -43,12 +43,12 @@ def main(argv=None) -> int:
             print(f"xrayraster {__version__}")
             return EXIT_OK
         with interrupts.deferred():  # a library interrupted mid-import may swallow it, or crash
-            from . import build, compare, info, preview, reconstruct, render, scan, voxelize, weave
+            from . import build, compare, fit, info, preview, reconstruct, render, scan, voxelize, weave
         keep_freed_memory()  # the command owns the process (core/heap.py)
         parser = argparse.ArgumentParser(prog="xrayraster", description="X-ray CT simulation from triangle meshes.")
         parser.add_argument("--version", action="version", version=f"xrayraster {__version__}")
         subparsers = parser.add_subparsers(dest="command", required=True)
-        for command in (scan, build, weave, render, preview, reconstruct, voxelize, compare, info):
+        for command in (scan, build, weave, render, preview, reconstruct, voxelize, compare, fit, info):
             command.add_parser(subparsers)
         args = parser.parse_args(argv)
         verbose = args.verbose

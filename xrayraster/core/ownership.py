@@ -7,7 +7,8 @@ was written by xrayraster, as its own format says:
   for stacks written before the tag was set, the ImageJ ``Info`` metadata is a JSON object;
 - PNG: the ``Software`` text chunk starts with ``xrayraster`` (or, written before, the quick-look's
   ``upscale`` chunk is there);
-- JSON: a top-level object whose ``generator`` starts with ``xrayraster``.
+- JSON: a top-level object whose ``generator`` starts with ``xrayraster``;
+- TOML: a first line that starts with :data:`TOML_HEADER` (the scan files ``xrayraster fit`` writes).
 
 Any other existing file, a directory, or a file that cannot be read is someone else's.
 
@@ -32,6 +33,8 @@ from .errors import ConfigError
 
 #: The Software tag / text chunk of every TIFF and PNG xrayraster writes.
 SOFTWARE = "xrayraster"
+#: The first line of every TOML file xrayraster writes starts with it.
+TOML_HEADER = "# Written by xrayraster"
 
 #: Suffixes that name a file, refused as the name of an output directory (``-o out.tif`` of a
 #: command that writes a directory is a mistake, not a directory the user wants).
@@ -64,6 +67,9 @@ def is_own_file(path) -> bool:
             return _own_png(path)
         if suffix == ".json":
             return str(_json_object(path).get("generator", "")).startswith(SOFTWARE)
+        if suffix == ".toml":
+            with open(path, encoding="utf-8") as f:
+                return f.readline().startswith(TOML_HEADER)
     except Exception:  # unreadable or not of its suffix's format: not ours, whatever went wrong
         return False
     return False

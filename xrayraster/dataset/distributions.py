@@ -10,7 +10,10 @@ plain value, which fixes the key (:class:`Fixed`):
   at the ends), drawn in one step by the inverse CDF, so no bound on retries is needed;
 - ``{ integer = [a, b] }``: an integer uniform in [a, b], both ends included, a < b;
 - ``{ choice = [v1, v2, ...], weights = [w1, w2, ...] }``: one of the values (any TOML value:
-  numbers, strings, arrays, tables), with the given weights (default equal).
+  numbers, strings, arrays, tables), with the given weights (default equal);
+- ``{ around = r }``: ±r (a share, 0 < r < 1) of the base scan's own value of the key, uniform:
+  ``{ uniform = [v·(1 − r), v·(1 + r)] }``, the form it is read as (``dataset_file`` resolves it
+  against the base; around a fitted scan file, docs/fit.md).
 
 Each distribution's ``to_dict()`` is the table it was read from, so
 ``distribution_from(d.to_dict(), ...) == d``; the draws are plain Python values (float, int, or a
@@ -32,6 +35,7 @@ __all__ = ["Choice", "Distribution", "Fixed", "Integer", "LogUniform", "Normal",
            "is_distribution"]
 
 KINDS = ("uniform", "loguniform", "normal", "integer", "choice")
+AROUND = "around"  # a share of the base's own value: read as a uniform (resolved_around)
 MODIFIERS = {"normal": ("clip",), "choice": ("weights",)}
 #: The least share of a normal's mass its clip interval must hold. Below it the interval lies in
 #: the far tail, where the inverse CDF loses its precision and the draw is no longer a Gaussian's.
@@ -129,7 +133,25 @@ Distribution = Uniform | LogUniform | Normal | Integer | Choice | Fixed
 def is_distribution(value) -> bool:
     """True for a table holding a distribution's key (a kind or a modifier); any other table in
     ``[vary]`` is a level of nesting (``[vary.source]``)."""
-    return isinstance(value, dict) and any(k in value for k in (*KINDS, "clip", "weights"))
+    return isinstance(value, dict) and any(k in value for k in (*KINDS, AROUND, "clip", "weights"))
+
+
+def resolved_around(value, key: str, base_value, where: str):
+    """``value`` with ``{ around = r }`` turned into the uniform ±r of ``base_value`` (the base scan's
+    value of ``key``); any other value as it is."""
+    if not (isinstance(value, dict) and AROUND in value):
+        return value
+    field = f"'{key}' around"
+    if set(value) != {AROUND}:
+        raise ConfigError(f"{where}: {field} takes no other keys (got {', '.join(sorted(value))}); write {{ around = 0.1 }}")
+    share = fields.number(value[AROUND], field, where, positive=True)
+    if share >= 1:
+        raise ConfigError(f"{where}: {field} = {show(share)} is a share of the base's value below 1 (0.1: ±10 %)")
+    if isinstance(base_value, bool) or not isinstance(base_value, (int, float)) or not base_value:
+        raise ConfigError(f"{where}: {field} needs a non-zero number for '{key}' in the base scan, which gives "
+                          f"{show(base_value) if base_value is not None else 'none'}; give {{ uniform = [a, b] }} instead")
+    low, high = sorted((base_value * (1 - share), base_value * (1 + share)))
+    return {"uniform": [float(low), float(high)]}
 
 
 def distribution_from(value, key: str, where: str) -> Distribution:

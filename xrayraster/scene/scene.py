@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass
-from typing import Hashable
+from typing import Hashable, Mapping
 
 import numpy as np
 
@@ -89,6 +89,17 @@ class Scene:
         self._nesting = None
         self._one_pass = None
         return obj
+
+    def with_materials(self, replaced: Mapping) -> "Scene":
+        """A copy whose objects' materials are replaced where ``replaced`` maps them, the meshes shared
+        (no mesh is checked again): the same channels in the same order, as the path lengths of this
+        scene have them."""
+        out = Scene()
+        for o in self._objects:
+            out.add(o.mesh, replaced.get(o.material, o.material), label=o.label, priority=o.priority, name=o.name)
+        if len(out.materials) != len(self.materials):
+            raise SceneError("with_materials: two materials became one; the path lengths' channels would not match")
+        return out
 
     @property
     def objects(self) -> tuple[SceneObject, ...]:

@@ -230,6 +230,30 @@ class Renderer(PathLengthRenderer):
                     shots.append(pending.popleft().result())
                 pending.append(cpu.submit(physics, v, lengths))
             shots.extend(f.result() for f in pending)
+        return self._stacked(shots, scene, spectrum, views, detector, output, noise, seed, realism, spectral_table)
+
+    def project_lengths(self, scene: Scene, lengths: Projections, spectrum, *, detector: Detector | None = None,
+                        output: str = "lineint", noise: bool = False, seed: int | None = None,
+                        realism: Realism | None = None, spectral_table: bool = False) -> Projections:
+        """The radiographs :meth:`project_all` makes of ``scene``, from its path lengths already rendered
+        (``lengths``: :meth:`path_lengths_all` of a scene with the same meshes and channels, such as
+        ``scene.with_materials(...)`` of it, on this renderer's geometry): no GL. A fit that varies
+        the materials, spectrum, detector or realism renders the path lengths once."""
+        if lengths.quantity != "path_length" or lengths.data.shape[1] != len(scene.materials):
+            raise RenderError(f"lengths must be the path lengths of the scene's {len(scene.materials)} materials "
+                              f"(Renderer.path_lengths_all), got {lengths.quantity} of shape {lengths.data.shape}")
+        views = list(lengths.provenance["views"])
+        detector = detector or Detector()
+        realism = realism or Realism()
+        # Views on every thread, each its spectral sum on one: the bytes depend on the view alone.
+        physics = self._physics_of(scene, spectrum, detector, output, noise, seed, realism, spectral_table, threads=1)
+        with ThreadPoolExecutor(self.threads, thread_name_prefix="xrayraster-physics") as cpu:
+            shots = list(cpu.map(physics, views, lengths.data))
+        return self._stacked(shots, scene, spectrum, views, detector, output, noise, seed, realism, spectral_table)
+
+    def _stacked(self, shots, scene, spectrum, views, detector, output, noise, seed, realism,
+                 spectral_table) -> Projections:
+        """The views' radiographs as one :class:`~xrayraster.Projections`, with their provenance."""
         unit = "1" if output != "raw" else "counts" if detector.counting else "keV deposited"
         # An ideal scan's provenance stays as it was before the realism options existed.
         extra = {"realism": realism.to_dict()} if realism.active else {}

@@ -1,0 +1,63 @@
+"""pipeline/fit_figures.py and the fit's mixture against volumes built with known answers: a box
+blurred by a known Gaussian, white noise of a known σ, rings of a known amplitude, two Gaussians."""
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from xrayraster.pipeline.fit import mixture_means
+from xrayraster.pipeline.fit_figures import measure
+
+SHAPE = (24, 64, 64)
+
+
+def frame():
+    """A box sample (label 1) in air, every voxel in the field of view, each column's axis distance."""
+    labels = np.zeros(SHAPE, np.uint8)
+    labels[6:18, 16:48, 16:48] = 1
+    rows, cols = SHAPE[1:]
+    radius = np.hypot(*np.meshgrid(np.arange(rows) - (rows - 1) / 2, np.arange(cols) - (cols - 1) / 2, indexing="ij"))
+    return labels, np.ones(SHAPE, bool), radius
+
+
+@pytest.mark.parametrize("sigma_voxels", [0.8, 1.0, 1.5, 2.0])
+def test_the_edge_width_is_the_blur_of_the_surface(sigma_voxels):
+    """A box of μ 0.5 blurred by a Gaussian of σ (a sampled kernel, exact from 0.8 voxels up): the
+    fitted error function's width is σ within 10 % (the box's edges and corners, whose voxels'
+    distances are not across a face, bend the profile a little)."""
+    labels, inside, radius = frame()
+    volume = ndimage.gaussian_filter(0.5 * labels.astype(np.float64), sigma_voxels, mode="nearest")
+    figures = measure(volume, labels, inside, radius, voxel_mm=0.1)
+    print(f"σ {sigma_voxels} voxels: measured {figures.edge_width_mm / 0.1:.3f}")
+    assert figures.edge_width_mm == pytest.approx(0.1 * sigma_voxels, rel=0.10)
+
+
+def test_the_noise_and_its_spectrum_are_white_noises():
+    labels, inside, radius = frame()
+    rng = np.random.default_rng(0)
+    volume = 0.5 * labels + rng.normal(0.0, 0.02, SHAPE)
+    figures = measure(volume, labels, inside, radius, voxel_mm=0.1)
+    assert figures.noise_sigma == pytest.approx(0.02, rel=0.02)
+    nps = np.array(figures.nps)
+    assert nps.sum() == pytest.approx(1.0) and nps[0] == pytest.approx(0.0, abs=1e-3)  # patches' means removed
+    assert nps[1:].std() / nps[1:].mean() < 0.1  # flat: white noise
+    assert figures.ring_rms < 0.02 / np.sqrt(2 * np.pi * 10) * 2  # noise alone: a floor of σ/√(ring's voxels)
+
+
+def test_rings_of_a_known_amplitude():
+    """Ring k about the axis offset by a·sin(2πk/3): the running median over nine rings of a pattern
+    of period 3 is 0, so the profile's fine structure is the pattern, of RMS a/√2."""
+    labels, inside, radius = frame()
+    amplitude = 0.01
+    pattern = amplitude * np.sin(2 * np.pi * radius.astype(int) / 3)
+    volume = np.broadcast_to(pattern, SHAPE) + 0.5 * labels
+    figures = measure(volume, labels, inside, radius, voxel_mm=0.1)
+    assert figures.ring_rms == pytest.approx(amplitude / np.sqrt(2), rel=0.05)
+    assert figures.peaks[1] == pytest.approx(0.5, abs=amplitude)
+
+
+def test_the_mixture_finds_two_gaussians_from_a_rough_start():
+    rng = np.random.default_rng(1)
+    values = np.concatenate([rng.normal(0.0, 0.03, 40_000), rng.normal(0.45, 0.05, 20_000)])
+    means = mixture_means(values, {"air": 0.05, "sample": 0.35})
+    assert means["air"] == pytest.approx(0.0, abs=2e-3) and means["sample"] == pytest.approx(0.45, abs=3e-3)

@@ -1,0 +1,150 @@
+"""What a segmentation network sees of a reconstruction, measured the same way on a real scan and on
+its simulation (docs/fit.md): each class's attenuation, the noise, its power spectrum's shape, the
+sharpness of the sample's surface and the rings.
+
+Every figure is read off a volume (z, y, x, cm⁻¹) with a label volume on the same grid (0 the air
+around the sample), ``inside``, the voxels the scan's field of view reaches, and each voxel
+column's distance from the rotation axis (voxels):
+
+* ``peaks``: per label, the median μ of its voxels a voxel or more inside its region (clear of
+  the partial volume at its borders; all its voxels where too few are that far inside);
+* ``noise_sigma``: the noise of μ in the air three voxels or more from the sample: the standard
+  deviation of the difference between neighbours along z over √2, which leaves out what varies
+  slowly along z (a cone beam's streaks and cupping, the same in neighbouring slices) and keeps
+  the photon noise (much of it independent from slice to slice);
+* ``nps``: the noise power spectrum of that air in axial slices, radially averaged and normalised
+  to sum 1 (its shape: a blur or a smoothing filter moves power to low frequencies);
+* ``edge_width_mm``: the σ of the Gaussian that blurs the sample's surface: an error function fitted
+  to the mean μ against the signed distance from the surface (voxels within four of it);
+* ``ring_rms``: in the air, per axial slice, the mean μ over each one-voxel ring about the rotation
+  axis, less its running median over nine rings; the RMS of that over rings and slices (cm⁻¹), at
+  the rings whose nine lie wholly in the air.
+  Noise alone gives a floor (the mean over a ring of n voxels has σ/√n of it).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage, optimize, special
+
+#: Voxels a class region is eroded by before its median is taken (its border's partial volume).
+PEAK_EROSION = 1
+#: Voxels a class needs for its peak (after the erosion, or else before it).
+MIN_VOXELS = 20
+#: Voxels the air is kept from the sample for the noise, its spectrum and the rings.
+AIR_MARGIN = 3
+#: Voxels from the surface whose μ the edge's error function is fitted to.
+EDGE_REACH = 4
+#: Side of the square air patches of the noise power spectrum (voxels).
+NPS_PATCH = 16
+#: Rings over which the running median of the ring profile is taken.
+RING_MEDIAN = 9
+
+
+@dataclass(frozen=True)
+class Figures:
+    """A volume's figures (module docstring); a figure its volume cannot give is NaN (``nps``, the
+    edge's ``edge_profile``, mean μ against the signed distance in mm: empty)."""
+
+    peaks: dict[int, float]
+    noise_sigma: float
+    nps: tuple[float, ...]
+    edge_width_mm: float
+    ring_rms: float
+    edge_profile: tuple[tuple[float, ...], tuple[float, ...]] = ((), ())
+
+    def to_dict(self) -> dict:
+        return {"peaks": {str(k): v for k, v in self.peaks.items()}, "noise_sigma": self.noise_sigma,
+                "nps": list(self.nps), "edge_width_mm": self.edge_width_mm, "ring_rms": self.ring_rms,
+                "edge_profile_mm": list(self.edge_profile[0]), "edge_profile": list(self.edge_profile[1])}
+
+
+def measure(volume: np.ndarray, labels: np.ndarray, inside: np.ndarray, axis_radius: np.ndarray,
+            voxel_mm: float) -> Figures:
+    """The :class:`Figures` of ``volume`` with its ``labels``, field of view ``inside`` (bool, as the
+    volume), the columns' ``axis_radius`` (rows, cols; voxels) and voxels of ``voxel_mm`` (the edge's unit)."""
+    volume = np.asarray(volume, dtype=np.float64)
+    peaks = {}
+    for label in (int(v) for v in np.unique(labels) if v != 0):
+        region = (labels == label) & inside
+        core = ndimage.binary_erosion(region, iterations=PEAK_EROSION)
+        core = core if core.sum() >= MIN_VOXELS else region  # a region too thin to erode: all of it
+        if core.sum() >= MIN_VOXELS:
+            peaks[label] = float(np.median(volume[core]))
+    sample = labels > 0
+    air = ~ndimage.binary_dilation(sample, iterations=AIR_MARGIN) & ndimage.binary_erosion(inside, iterations=1)
+    pairs = air[1:] & air[:-1]
+    noise = float((volume[1:] - volume[:-1])[pairs].std() / math.sqrt(2)) if pairs.sum() > 100 else math.nan
+    width, (distance, profile) = _edge(volume, sample, inside)
+    return Figures(peaks, noise, _nps(volume, air), width * voxel_mm, _ring_rms(volume, air, axis_radius),
+                   (tuple((distance * voxel_mm).tolist()), tuple(profile.tolist())))
+
+
+def _nps(volume: np.ndarray, air: np.ndarray) -> tuple[float, ...]:
+    """The radially averaged power spectrum of the air's patches (module docstring), sums to 1."""
+    n = NPS_PATCH
+    power, count = np.zeros((n, n)), 0
+    for z in range(volume.shape[0]):
+        for y in range(0, volume.shape[1] - n + 1, n):
+            for x in range(0, volume.shape[2] - n + 1, n):
+                if air[z, y:y + n, x:x + n].all():
+                    patch = volume[z, y:y + n, x:x + n]
+                    power += np.abs(np.fft.fft2(patch - patch.mean())) ** 2
+                    count += 1
+    if not count or not power.any():  # no air patch, or air without noise
+        return ()
+    frequency = np.hypot(*np.meshgrid(np.fft.fftfreq(n), np.fft.fftfreq(n), indexing="ij"))
+    bins = np.minimum((frequency * n).astype(int), n // 2)
+    radial = np.bincount(bins.ravel(), power.ravel()) / np.bincount(bins.ravel())
+    return tuple((radial / radial.sum()).tolist())
+
+
+def _edge(volume: np.ndarray, sample: np.ndarray, inside: np.ndarray) -> tuple[float, tuple]:
+    """σ (voxels) of the error function fitted to μ against the signed distance from the sample's
+    surface, and that profile (distances in voxels, mean μ)."""
+    outside = ndimage.distance_transform_edt(~sample)
+    within = ndimage.distance_transform_edt(sample)
+    distance = np.where(sample, -(within - 0.5), outside - 0.5)  # voxel centres: ±0.5 at the surface
+    near = (np.abs(distance) <= EDGE_REACH) & ndimage.binary_erosion(inside, iterations=EDGE_REACH)
+    if near.sum() < 50:
+        return math.nan, (np.zeros(0), np.zeros(0))
+    d, v = distance[near], volume[near]
+    centres = np.round(d * 4) / 4  # quarter-voxel bins of the profile
+    bins, index = np.unique(centres, return_inverse=True)
+    profile = np.bincount(index, v) / np.bincount(index)
+    weight = np.sqrt(np.bincount(index))
+
+    def step(x, low, high, centre, width):
+        return low + (high - low) * 0.5 * special.erfc((x - centre) / (math.sqrt(2) * width))
+
+    start = (float(v[d > 1].mean()) if (d > 1).any() else 0.0, float(v[d < -1].mean()) if (d < -1).any() else 1.0,
+             0.0, 0.7)
+    try:
+        fitted, _ = optimize.curve_fit(step, bins, profile, p0=start, sigma=1 / weight,
+                                       bounds=([-np.inf, -np.inf, -2.0, 0.05], [np.inf, np.inf, 2.0, 5.0]))
+    except (RuntimeError, ValueError):
+        return math.nan, (bins, profile)
+    return float(fitted[3]), (bins, profile)
+
+
+def _ring_rms(volume: np.ndarray, air: np.ndarray, axis_radius: np.ndarray) -> float:
+    """The rings' RMS (module docstring): the ring profile's fine structure in the air, cm⁻¹, at the
+    rings whose nine-ring neighbourhood lies wholly in the air."""
+    ring = np.asarray(axis_radius).astype(int).ravel()
+    half = RING_MEDIAN // 2
+    residues = []
+    for z in range(volume.shape[0]):
+        mask = air[z].ravel()
+        counts = np.bincount(ring[mask], minlength=ring.max() + 1)
+        sums = np.bincount(ring[mask], volume[z].ravel()[mask], minlength=ring.max() + 1)
+        profile = np.where(counts >= 16, sums / np.maximum(counts, 1), np.nan)
+        if len(profile) < RING_MEDIAN:
+            continue
+        windows = np.lib.stride_tricks.sliding_window_view(profile, RING_MEDIAN)
+        whole = ~np.isnan(windows).any(axis=1)
+        residues.append(profile[half:len(profile) - half][whole] - np.median(windows[whole], axis=1))
+    values = np.concatenate(residues) if residues else np.zeros(0)
+    return float(np.sqrt(np.mean(values**2))) if values.size else math.nan
