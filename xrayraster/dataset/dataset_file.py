@@ -30,7 +30,7 @@ from ..core.choices import DATASET_KEEP, DATASET_LAYOUTS, DATASET_SPLITS
 from ..core.errors import ConfigError, GeometryError, WeaveError
 from ..core.validate import show
 from ..io.scan_file import SCAN_TABLES, ScanFile, load_scan_file
-from ..io.scan_keys import ANY, INDEX, KEYS, absolute_paths, check_key, set_key
+from ..io.scan_keys import ANY, INDEX, KEYS, absolute_paths, check_key, set_key, value_at
 from ..io.scene_file import read_toml
 from .distributions import KINDS, Distribution, Fixed, distribution_from, is_distribution, resolved_around
 from .layouts import NAME_RULE, check_name
@@ -266,20 +266,8 @@ def _vary(table: dict, base: dict, where: str) -> dict[str, Distribution]:
         inside = [other for other in flat if key.startswith(other + ".")]
         if inside:
             raise ConfigError(f"{where}: '{key}' lies inside '{inside[0]}', which is varied too; vary one of them")
-    return {key: distribution_from(resolved_around(value, key, _value_at(base, key), where), key, where)
+    return {key: distribution_from(resolved_around(value, key, value_at(base, key), where), key, where)
             for key, value in flat.items()}
-
-
-def _value_at(table: dict, key: str):
-    """The base table's value of the dotted ``key``, None where it gives none."""
-    for part in key.split("."):
-        if isinstance(table, list) and part.isdigit() and int(part) < len(table):
-            table = table[int(part)]
-        elif isinstance(table, dict) and part in table:
-            table = table[part]
-        else:
-            return None
-    return table
 
 
 def _flatten(table: dict, prefix: str, where: str) -> dict:

@@ -32,7 +32,7 @@ from .scene_file import (
 )
 from .weave_file import SAMPLE_TABLE_KEYS
 
-__all__ = ["ANY", "INDEX", "KEYS", "PATH_KEYS", "absolute_paths", "check_key", "set_key"]
+__all__ = ["ANY", "INDEX", "KEYS", "PATH_KEYS", "absolute_paths", "check_key", "set_key", "value_at"]
 
 ANY = "*"  # any name: a material, a filter's material, an element
 INDEX = "#"  # an entry of an array of tables, by its index from 0
@@ -116,6 +116,18 @@ def set_key(table: dict, key: str, value) -> None:
     for part in parents:
         table = table[int(part)] if isinstance(table, list) else table.setdefault(part, {})
     table[int(last) if isinstance(table, list) else last] = value
+
+
+def value_at(table: dict, key: str):
+    """The value of the dotted ``key`` in ``table`` (array entries by index), None where it gives none."""
+    for part in key.split("."):
+        if isinstance(table, list) and part.isdigit() and int(part) < len(table):
+            table = table[int(part)]
+        elif isinstance(table, dict) and part in table:
+            table = table[part]
+        else:
+            return None
+    return table
 
 
 def absolute_paths(table: dict, directory: Path) -> dict:

@@ -113,7 +113,7 @@ def radiograph(lengths, materials, spectrum, detector: Detector, factor, *, outp
     model = model or spectral_model(materials, spectrum, detector, bin_tolerance=bin_tolerance)
     energies, photons, dropped, mu = model.energies, model.photons, model.dropped, model.mu
     focal_sigma_px = applied_focal_sigma_px(focal_sigma_px)
-    scattered = None if scatter is None else scatter_signal(scatter, lengths, mu, photons, factor)
+    scattered = None if scatter is None else scatter_signal(scatter, lengths, mu, factor)
     extra = None if scattered is None else (scattered, scattered * scatter.quantum)
     quantum = _detected(lengths, mu, photons, energies, detector, factor, focal_sigma_px, rng if noise else None,
                         threads, model.table, extra)

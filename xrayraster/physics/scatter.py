@@ -92,16 +92,15 @@ def detector_layout(geometry, view: int = 0) -> DetectorLayout:
 @dataclass(frozen=True, eq=False)
 class ScatterModel:
     """What every view of a scan shares (:func:`scatter_model`): the coarse grid (``cell`` pixels a
-    side, ``coarse`` cells), the energy groups (``groups``: a group index per bin), the scattering
-    part of μ per material channel and bin (``mu_scatter``, mm⁻¹), the kernels' spectra (rfft2 of the
-    padded grid: channel, pencil, group) and each cell's interpolation weights of the pencils
-    (``pencil_weights``: pencil, rows, cols), the pixels in each cell (``pixels``), and the signal
-    per detected scattered photon (``quantum``, for its noise)."""
+    side, ``coarse`` cells), each material channel's photons scattered per mm of path by energy group
+    and bin (``emission``: N_b · μs_mb in its bin's group, 0 elsewhere: channel, group, bin), the
+    kernels' spectra (rfft2 of the padded grid: channel, pencil, group) and each cell's interpolation
+    weights of the pencils (``pencil_weights``: pencil, rows, cols), the pixels in each cell
+    (``pixels``), and the signal per detected scattered photon (``quantum``, for its noise)."""
 
     cell: int
     coarse: tuple[int, int]
-    groups: np.ndarray
-    mu_scatter: np.ndarray
+    emission: np.ndarray
     kernels: np.ndarray
     pencil_weights: np.ndarray
     pixels: np.ndarray
@@ -152,7 +151,9 @@ def scatter_model(materials, energies, photons, detector, layout: DetectorLayout
     open_beam = source.sum()
     quantum = 1.0 if detector.counting or not open_beam else float((source * energies).sum() / open_beam)
     pixels = _block_sum(np.ones((1, rows, cols)), cell)[0]
-    return ScatterModel(cell, coarse, groups, mu_scatter, np.stack(kernels), pencil_weights, pixels, quantum)
+    emission = np.zeros((len(materials), groups.max() + 1, len(energies)))
+    emission[:, groups, np.arange(len(energies))] = photons * mu_scatter
+    return ScatterModel(cell, coarse, emission, np.stack(kernels), pencil_weights, pixels, quantum)
 
 
 def _pencil_geometry(coarse, cell_mm, layout: DetectorLayout, pencil_mm) -> tuple[np.ndarray, np.ndarray]:
@@ -215,24 +216,21 @@ def _energy_groups(source: np.ndarray) -> np.ndarray:
     return np.unique(groups, return_inverse=True)[1]
 
 
-def scatter_signal(model: ScatterModel, lengths, mu, photons, factor) -> np.ndarray:
+def scatter_signal(model: ScatterModel, lengths, mu, factor) -> np.ndarray:
     """The mean scatter signal of one view, ``(rows, cols)`` float64, in the detector's signal units:
-    ``lengths`` (channels, rows, cols) mm, ``mu`` (channels, bins) mm⁻¹, ``photons`` per bin,
+    ``lengths`` (channels, rows, cols) mm, ``mu`` (channels, bins) mm⁻¹ of the model's bins,
     ``factor`` the pixels' photon factor (module docstring)."""
     rows, cols = lengths.shape[1:]
     factor = np.broadcast_to(np.asarray(factor, dtype=np.float64), (rows, cols))
     area = _block_sum(factor[None], model.cell)[0]  # mm² at 1 m each coarse cell collects
     mean_lengths = _block_sum(np.asarray(lengths), model.cell).astype(np.float64) / model.pixels
     transmission = np.exp(-np.tensordot(mu.T, mean_lengths, axes=1))  # (bins, cells)
-    groups = model.groups.max() + 1
     padded = _padded(model.coarse)
     spectrum = np.zeros(model.kernels.shape[-2:], dtype=np.complex128)
     for m in range(len(lengths)):
         if not mean_lengths[m].any():
             continue
-        by_group = np.zeros((groups, len(photons)))
-        by_group[model.groups, np.arange(len(photons))] = photons * model.mu_scatter[m]
-        sources = np.tensordot(by_group, transmission, axes=1) * (area * mean_lengths[m])  # (groups, cells)
+        sources = np.tensordot(model.emission[m], transmission, axes=1) * (area * mean_lengths[m])  # (groups, cells)
         by_pencil = sources[None] * model.pencil_weights[:, None]  # (pencils, groups, cells)
         spectrum += (scipy.fft.rfft2(by_pencil, s=padded) * model.kernels[m]).sum(axis=(0, 1))
     coarse = scipy.fft.irfft2(spectrum, s=padded)[: model.coarse[0], : model.coarse[1]]

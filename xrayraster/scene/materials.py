@@ -37,7 +37,7 @@ from .material_library import LIBRARY, library_key
 
 try:  # array interface shipped with the xraylib wheels; same C code as the scalar functions
     import xraylib_np as _xraylib_np
-except ImportError:  # pragma: no cover - older/partial installs: scalar loop with a cache
+except ImportError:  # pragma: no cover - older/partial installs: scalar loop with a cache (_scalar)
     _xraylib_np = None
 
 __all__ = ["Material", "MaterialError", "ENERGY_MIN_KEV", "ENERGY_MAX_KEV", "Z_MAX"]
@@ -169,18 +169,6 @@ def _check_energies(energies_kev) -> np.ndarray:
             f"use finite energies in [{ENERGY_MIN_KEV:g}, {ENERGY_MAX_KEV:g}] keV"
         )
     return e
-
-
-@lru_cache(maxsize=65536)
-def _cs_total_scalar(z: int, e: float) -> float:
-    return xraylib.CS_Total(z, e)
-
-
-def _cs_total(zs: np.ndarray, e_flat: np.ndarray) -> np.ndarray:
-    """CS_Total for every (Z, E): shape (len(zs), len(e_flat)), cm²/g."""
-    if _xraylib_np is not None:
-        return _xraylib_np.CS_Total(zs.astype(np.int64), np.ascontiguousarray(e_flat, dtype=np.float64))
-    return np.array([[_cs_total_scalar(int(z), float(x)) for x in e_flat] for z in zs], dtype=np.float64)
 
 
 @dataclass(frozen=True)
@@ -349,10 +337,7 @@ class Material:
         otherwise :class:`MaterialError`.
         """
         e = _check_energies(energies_kev)
-        zs = np.array([z for z, _ in self.composition], dtype=np.int64)
-        ws = np.array([w for _, w in self.composition], dtype=np.float64)
-        cs = _cs_total(zs, e.reshape(-1))  # (elements, energies)
-        return (ws @ cs).reshape(e.shape)
+        return _by_element(self, "CS_Total", e.reshape(-1)).reshape(e.shape)
 
     def attenuation_per_mm(self, energies_kev) -> np.ndarray:
         """Linear attenuation coefficient μ in mm⁻¹ (= μ/ρ [cm²/g] · ρ [g/cm³] / 10), the unit
@@ -388,17 +373,18 @@ def _by_element(material: Material, function: str, energies: np.ndarray, *angles
     if _xraylib_np is not None:
         table = getattr(_xraylib_np, function)(zs, np.ascontiguousarray(energies, dtype=np.float64), *angles)
     else:  # pragma: no cover - scalar fallback
-        scalar = getattr(xraylib, function)
         grid = np.stack(np.meshgrid(energies, *angles, indexing="ij"), axis=-1).reshape(-1, 1 + len(angles))
-        table = np.array([[_or_zero(scalar, int(z), *map(float, point)) for point in grid] for z in zs])
+        table = np.array([[_scalar(function, int(z), *map(float, point)) for point in grid] for z in zs])
         table = table.reshape(len(zs), len(energies), *(len(a) for a in angles))
     return np.tensordot(ws, table, axes=1)
 
 
-def _or_zero(function, *args) -> float:
-    """``function(*args)``, 0 where xraylib's tables do not reach (the smallest momentum transfers)."""
+@lru_cache(maxsize=65536)
+def _scalar(function: str, *args) -> float:
+    """xraylib's scalar ``function(*args)``, 0 where its tables do not reach (a differential cross
+    section at the smallest momentum transfers; the energies are checked before)."""
     try:
-        return function(*args)
+        return getattr(xraylib, function)(*args)
     except ValueError:
         return 0.0
 
