@@ -11,7 +11,8 @@ methods users try first (docs/ml.md).
    set (its seed + 1000: 10 other scans from the same ranges), scored only after every choice here
    (the normalisation, the post-processing) was fixed by the shifted set's scores: a choice fitted
    to those 10 scans would show as a gap between the two. ``--train-file`` trains on another dataset
-   file of examples/ instead (docs/ml.md: ml_train_scanner.toml, ml_train_randomized.toml).
+   file instead: a name in examples/ (docs/ml.md: ml_train_scanner.toml, ml_train_randomized.toml) or a path
+   (scripts/train_around_fit.py writes one around a fit).
 2. **Network.** MONAI's 3-D ``UNet`` (``--channels``: the width of each level, 16-128 by default;
    strides 2, two residual units), one input channel (0 cm⁻¹ mapped to 0 and the median of the
    volume's material to 1, clipped to -0.25 and 1.5: ``xr.ml.MaterialScale()``), one output per
@@ -77,7 +78,7 @@ def main(argv=None) -> int:
                     help="the U-Net's channels at each level, comma-separated (default 16,32,64,128)")
     ap.add_argument("--augment", action="store_true", help="augment each patch (module docstring; off by default)")
     ap.add_argument("--train-file", default=BUILDS["train"][0],
-                    help="the training set's dataset file in examples/ (default ml_train.toml)")
+                    help="the training set's dataset file: a name in examples/ (default ml_train.toml) or a path")
     ap.add_argument("--out", type=Path, help="the builds and model.pt (default out/ml; --quick: out/ml_quick)")
     args = outputs(ap.parse_args(argv), "train_segmentation")
     iterations = args.iterations or (30 if args.quick else 3000)
@@ -93,7 +94,7 @@ def main(argv=None) -> int:
     folder = args.out or OUT / ("ml_quick" if args.quick else "ml")
     builds, seconds = {}, {}
     for name, (file, reseed, count) in BUILDS.items():
-        dataset = load_dataset_file(ROOT / "examples" / (args.train_file if name == "train" else file))
+        dataset = load_dataset_file(_dataset_path(args.train_file if name == "train" else file))
         dataset = dataclasses.replace(dataset, seed=dataset.seed + reseed, count=count if args.quick else dataset.count)
         start = time.perf_counter()
         xr.build(dataset, folder / name, workers=min(2, dataset.count))  # no more processes than samples
@@ -134,6 +135,12 @@ def main(argv=None) -> int:
                "results": results, "plots": [str(p) for p in plots if p]}
     conclude(args.json, payload, machine, t_start)
     return 0
+
+
+def _dataset_path(name: str) -> Path:
+    """examples/``name`` where that file exists, else ``name`` as a path."""
+    shipped = ROOT / "examples" / name
+    return shipped if shipped.is_file() else Path(name)
 
 
 def fit(torch, train, classes: int, channels: tuple, iterations: int, batch: int, seed: int, augment=None):

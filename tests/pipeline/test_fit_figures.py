@@ -6,7 +6,7 @@ import pytest
 from scipy import ndimage
 
 from xrayraster.pipeline.fit import mixture_means
-from xrayraster.pipeline.fit_figures import measure
+from xrayraster.pipeline.fit_figures import measure, sides_seen
 
 SHAPE = (24, 64, 64)
 
@@ -30,6 +30,16 @@ def test_the_edge_width_is_the_blur_of_the_surface(sigma_voxels):
     figures = measure(volume, labels, inside, radius, voxel_mm=0.1)
     print(f"σ {sigma_voxels} voxels: measured {figures.edge_width_mm / 0.1:.3f}")
     assert figures.edge_width_mm == pytest.approx(0.1 * sigma_voxels, rel=0.10)
+
+
+def test_a_slab_through_the_grid_shows_no_side():
+    """A box inside the grid shows sides (its surface a cone beam's FDK keeps sharp); a slab through
+    the whole grid shows only faces along the axis, and two volumes show sides only if both do."""
+    labels, inside, _ = frame()
+    slab = np.zeros(SHAPE, bool)
+    slab[6:18] = True
+    assert sides_seen(labels > 0, inside=inside)
+    assert not sides_seen(slab, inside=inside) and not sides_seen(labels > 0, slab, inside=inside)
 
 
 def test_the_noise_and_its_spectrum_are_white_noises():

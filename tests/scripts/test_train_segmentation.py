@@ -111,3 +111,49 @@ def test_no_training_range_reaches_the_shifted_sets(train_file):
                 f"{train_file}: {key} = {train[key]} reaches the shifted set's {shifted[key]}"
         compared += 1
     assert compared >= 8, f"{train_file}: only {compared} ranges compared"
+
+
+def test_the_run_around_a_fit_tells_the_fit_only_what_a_user_knows(torch, gl, cl, tmp_path):
+    """scripts/train_around_fit.py --quick (docs/ml.md, "Training around a fit"): the scan file the fit
+    starts from takes of the shifted scan only its scanner's settings and its holder (not its mAs,
+    focal spot, blur, gain variation, tracer or weave); the training file is ml_train_scanner.toml's,
+    its scanner's ranges replaced by ±10 % of each fitted knob (±2 % of each density) about the
+    fitted file (a knob the fit could not pin down: of the start file's value); the network is
+    trained and scored on the shifted set."""
+    import tomllib
+
+    from xrayraster.dataset.dataset_file import draw, load_dataset_file
+    from xrayraster.dataset.distributions import Uniform
+    from xrayraster.io.scan_keys import value_at
+
+    folder = tmp_path / "ml"
+    subprocess.run([sys.executable, "-m", "scripts.train_around_fit", "--quick", "--out", str(folder),
+                    "--plots-dir", str(tmp_path), "--json", str(tmp_path / "run.json")], cwd=ROOT, check=True)
+    shifted = draw(load_dataset_file(ROOT / "examples" / "ml_shifted.toml"), 0).table
+    start = tomllib.loads((folder / "start.toml").read_text())
+    assert start["source"]["kvp"] == shifted["source"]["kvp"] == 50.0 and start["mount"] == shifted["mount"]
+    assert start["geometry"]["source_to_origin"] == shifted["geometry"]["source_to_origin"]
+    assert start["detector"] == {"flat_fields": 10}  # no blur, no gain variation
+    assert start["source"]["mas"] == 1.25 and "focal_spot_mm" not in start["source"]  # scan_small.toml's
+    assert "tracers" not in start["weave"]["materials"] and "weft_spacing" not in start["weave"]
+
+    fitted = tomllib.loads((folder / "fitted.toml").read_text())
+    train = tomllib.loads((folder / "train.toml").read_text())
+    scanner = tomllib.loads((ROOT / "examples" / "ml_train_scanner.toml").read_text())["vary"]
+    report = json.loads((folder / "fitted.fit.json").read_text())
+    assert train["base"] == "fitted.toml"
+    for key in ("source.kvp", "detector.flat_fields", "geometry.source_to_origin"):
+        assert key not in train["vary"]
+    resolved = load_dataset_file(folder / "train.toml").vary
+    for key in ("source.mas", "detector.blur_sigma_px", "detector.gain_variation"):
+        value = value_at(fitted, key)  # as the fitted file rounds it
+        assert value == pytest.approx(report["parameters"][key]["fitted"], rel=1e-5, abs=1e-9)
+        assert resolved[key] == Uniform(value * 0.9, value * 1.1) if value else key not in train["vary"]
+    assert "source.focal_spot_mm" not in train["vary"]
+    for name in ("weft_carbon", "warp_carbon", "matrix"):
+        density = fitted["materials"][name]["density"]
+        assert resolved[f"materials.{name}.density"] == Uniform(density * 0.98, density * 1.02)
+    for key, value in train["vary"].items():  # the weave and the tracers as ml_train_scanner.toml draws them
+        assert key in report["parameters"] or value == scanner[key]
+    run = json.loads((tmp_path / "run.json").read_text())
+    assert 0.0 <= run["training"]["results"]["shifted"]["network"]["mean_dice"] <= 1.0

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import os
-import sys
 import threading
 
 import numpy as np
@@ -17,7 +16,6 @@ from PIL import Image
 
 import xrayraster as xr
 from xrayraster.core.tiff import QUICKLOOK_MIN_PX, quicklook_factor, write_quicklook
-from xrayraster.simulate.renderer import PHYSICS_NICENESS
 
 GEOMETRY = xr.ConeBeamGeometry(100.0, 200.0, (24, 30), 0.8, xr.full_circle(5))
 MONO = xr.Spectrum.monochromatic(60.0, 1e6)
@@ -102,8 +100,8 @@ def test_project_all_overlaps_the_physics_and_keeps_every_byte(renderer, scene, 
     """The physics of view k runs on a thread (``workers`` of them, as beside a GPU) while the GL
     renders view k + 1: with the scan's shared patterns (flats, gain map, a focal spot) and views
     out of order, every view is still the bytes project() gives alone, and the physics did run off
-    the main thread; beside a GL on the CPU (llvmpipe), at the lowest priority as the kernel reports
-    it, the caller's unchanged."""
+    the main thread, at the caller's priority as the kernel reports it (a lowered one starved the
+    physics whenever another process rendered: 13x slower samples in a two-worker build)."""
     realism = xr.Realism(focal_spot_mm=0.3, flat_fields=4, gain_variation=0.01)
     threads = set()
     physics_of = renderer._physics_of
@@ -127,8 +125,7 @@ def test_project_all_overlaps_the_physics_and_keeps_every_byte(renderer, scene, 
     for k, v in enumerate(views):
         np.testing.assert_array_equal(p.data[k], renderer.project(scene, MONO, v, noise=True, seed=11,
                                                                   realism=realism).image)
-    if renderer.gl.software and sys.platform.startswith("linux"):
-        assert {nice for name, nice in threads if name.startswith("xrayraster-physics")} == {PHYSICS_NICENESS}
+    assert {nice for _, nice in threads} == {niceness}
     assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) == niceness
 
 

@@ -55,7 +55,7 @@ from ..recon.fdk_weights import footprint_radius
 from ..recon.opencl import CLContext
 from ..scene.materials import Material
 from ..simulate.renderer import Renderer
-from .fit_figures import Figures, measure
+from .fit_figures import Figures, measure, sides_seen
 
 #: Relative error of each figure within which it is fitted (the peaks: each class's).
 TOLERANCES = {"peaks": 0.01, "noise_sigma": 0.05, "edge_width_mm": 0.05, "ring_rms": 0.10}
@@ -129,14 +129,19 @@ def fit(real, scan, *, labels=None, rounds: int = 3, gl=None, cl: CLContext | No
         mixture: dict = {}
         lowest: list = []
 
+        def sample_of(volume, labels_=None, peak=None):
+            if not mixture:
+                return labels_
+            peak = mixture_means(volume[inside], mixture)["sample"] if peak is None else peak
+            above = volume > lowest[0] / 2 * peak / mixture["sample"]
+            return ndimage.binary_fill_holes(ndimage.binary_opening(above, iterations=1)).astype(np.uint8)
+
         def figures(volume, labels_=None):
             if not mixture:
                 return measure(volume, labels_, inside, axis_radius, voxel_mm)
             peak = mixture_means(volume[inside], mixture)["sample"]
-            above = volume > lowest[0] / 2 * peak / mixture["sample"]
-            sample = ndimage.binary_fill_holes(ndimage.binary_opening(above, iterations=1)).astype(np.uint8)
-            return dataclasses.replace(measure(volume, sample, inside, axis_radius, voxel_mm),
-                                       peaks=dict.fromkeys(classes, peak))
+            measured = measure(volume, sample_of(volume, peak=peak), inside, axis_radius, voxel_mm)
+            return dataclasses.replace(measured, peaks=dict.fromkeys(classes, peak))
 
         volumes = {"real": real}
 
@@ -144,7 +149,9 @@ def fit(real, scan, *, labels=None, rounds: int = 3, gl=None, cl: CLContext | No
             projections = renderer.project_lengths(
                 scanned.with_materials(k.materials(scanned.materials)), lengths, k.spectrum(loaded.spectrum),
                 detector=k.detector(loaded.detector), noise=noise and loaded.options.noise, seed=loaded.options.seed,
-                realism=dataclasses.replace(loaded.realism, gain_variation=k.gain), spectral_table=True)
+                realism=dataclasses.replace(loaded.realism, gain_variation=k.gain,  # without noise the flats' too
+                                            flat_fields=loaded.realism.flat_fields if noise else None),
+                spectral_table=True)
             volume = fdk(projections, volume=loaded.volume, filter=loaded.options.filter, context=cl,
                          truncation=loaded.options.truncation, truncation_width=loaded.options.truncation_width,
                          object_radius_mm=footprint_radius(*scanned.bounds))
@@ -153,15 +160,23 @@ def fit(real, scan, *, labels=None, rounds: int = 3, gl=None, cl: CLContext | No
             return figures(volume.data, simulated_labels)
 
         start = run(knobs, keep="start")
+        real_labels = None
         if labels is not None:
-            target = figures(real, _given_labels(labels, loaded, start))
+            real_labels = _given_labels(labels, loaded, start)
         else:
             classes.extend(start.peaks)
             lowest.append(min(start.peaks.values()))
             mixture.update(air=0.0, sample=float(np.mean(list(start.peaks.values()))))
             mixture["sample"] = mixture_means(volumes["start"][inside], mixture)["sample"]
-            start, target = figures(volumes["start"]), figures(real)
+            start = figures(volumes["start"])
+        target = figures(real, real_labels)
         search = _Search(knobs, start, target, run, scanned.objects)
+        if not sides_seen(sample_of(real, real_labels) > 0, sample_of(volumes["start"], simulated_labels) > 0,
+                          inside=inside):
+            search.kept.add("detector.blur_sigma_px")
+            search.unidentified["detector.blur_sigma_px"] = (
+                "the sample shows no side in the field of view, and its faces along the axis are smeared by the "
+                "cone beam (Feldkamp's artefact) more than by a blur: the file's kept")
         if classes:
             search.unidentified["materials.*.density"] = ("without region labels the classes' peaks overlap: one factor "
                                                           "is fitted for every material of the sample (--labels fits each)")
@@ -248,6 +263,7 @@ class _Search:
         self.label_material = {o.label: getattr(o.material, "name", None) for o in objects}
         self.runs = [self._record(knobs, start)]
         self.unidentified: dict[str, str] = {}
+        self.kept: set[str] = set()  # knobs the figures cannot show at all: never changed
 
     @property
     def best(self) -> tuple[_Knobs, Figures]:
@@ -272,7 +288,8 @@ class _Search:
         return figures
 
     def round(self) -> None:
-        self.knobs = self._quadratic("blur", "edge_width_mm", BLUR_STEP_PX, "detector.blur_sigma_px")
+        if "detector.blur_sigma_px" not in self.kept:
+            self.knobs = self._quadratic("blur", "edge_width_mm", BLUR_STEP_PX, "detector.blur_sigma_px")
         self._densities()  # after the blur, which moves the peaks of thin regions
         self.knobs = self._quadratic("gain", "ring_rms", GAIN_STEP, "detector.gain_variation")
         self._mas()  # after the rings, which vary from slice to slice as the noise does

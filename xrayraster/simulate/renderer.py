@@ -4,9 +4,7 @@ detector, noise). GL knows nothing of photons and the physics nothing of GL; thi
 from __future__ import annotations
 
 import logging
-import os
 import sys
-import threading
 import time
 from collections import deque
 from concurrent.futures import ThreadPoolExecutor
@@ -219,10 +217,10 @@ class Renderer(PathLengthRenderer):
         # The GL renders view k + 1 while threads turn the views before it into radiographs (numpy, the
         # spectral sum and a view's GL calls release the GIL): a view costs the larger of the two, not
         # their sum, where they run on different hardware (a GPU), and the GL's idle moments are filled
-        # on a CPU, where the one physics thread yields to llvmpipe's (_yield_to_gl). Each view's
-        # physics depends on its path lengths and index alone: the same bytes in any order.
-        with ThreadPoolExecutor(workers, thread_name_prefix="xrayraster-physics",
-                                initializer=_yield_to_gl if self.gl.software else None) as cpu:
+        # on a CPU. Each view's physics depends on its path lengths and index alone: the same bytes in
+        # any order. The physics thread keeps the caller's priority: at a lower one (niceness 19, tried)
+        # it starved whenever another process rendered (two builds' workers: 105 s a sample for 8 s).
+        with ThreadPoolExecutor(workers, thread_name_prefix="xrayraster-physics") as cpu:
             pending = deque()
             for v in _report(views, progress, output):
                 lengths = self.path_lengths(scene, v)
@@ -315,23 +313,6 @@ def physics_workers(software_gl: bool, threads: int) -> int:
     on two. A view's physics is mostly single-threaded numpy (the noise, the flat, the log): on an
     NVIDIA H200's 16-core host one view took 17–22 ms on 1 to 16 threads, twice the GPU's view."""
     return 1 if software_gl else max(1, threads // 2)
-
-
-#: The niceness of the physics thread beside a GL that renders on the CPU (Linux: a thread's own).
-PHYSICS_NICENESS = 19
-
-
-def _yield_to_gl() -> None:
-    """Lower the calling thread's priority to :data:`PHYSICS_NICENESS`, so it runs where llvmpipe's
-    threads leave a core idle rather than taking a core from them in the middle of a dispatch,
-    whose threads all wait at its end for the last. Measured on 2 vCPUs, 100 twin views of 512²:
-    37.0–37.8 ms a view against 40.5–41.2 (niceness 0), two alternating runs each. Linux only
-    (elsewhere ``setpriority`` sets the whole process's); a refusal leaves the thread as it was."""
-    if sys.platform.startswith("linux"):
-        try:
-            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), PHYSICS_NICENESS)
-        except OSError:
-            pass
 
 
 def _material_name(material) -> str:
