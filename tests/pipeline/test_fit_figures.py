@@ -35,11 +35,12 @@ def test_the_edge_width_is_the_blur_of_the_surface(sigma_voxels):
 def test_a_slab_through_the_grid_shows_no_side():
     """A box inside the grid shows sides (its surface a cone beam's FDK keeps sharp); a slab through
     the whole grid shows only faces along the axis, and two volumes show sides only if both do."""
-    labels, inside, _ = frame()
-    slab = np.zeros(SHAPE, bool)
-    slab[6:18] = True
-    assert sides_seen(labels > 0, inside=inside)
-    assert not sides_seen(slab, inside=inside) and not sides_seen(labels > 0, slab, inside=inside)
+    labels, inside, radius = frame()
+    slab = np.zeros(SHAPE, np.uint8)
+    slab[6:18] = 1
+    box, plate = (measure(0.5 * sample.astype(np.float64), sample, inside, radius, 0.1) for sample in (labels, slab))
+    assert sides_seen(box)
+    assert not sides_seen(plate) and not sides_seen(box, plate)
 
 
 def test_the_noise_and_its_spectrum_are_white_noises():

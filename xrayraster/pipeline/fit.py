@@ -129,19 +129,14 @@ def fit(real, scan, *, labels=None, rounds: int = 3, gl=None, cl: CLContext | No
         mixture: dict = {}
         lowest: list = []
 
-        def sample_of(volume, labels_=None, peak=None):
-            if not mixture:
-                return labels_
-            peak = mixture_means(volume[inside], mixture)["sample"] if peak is None else peak
-            above = volume > lowest[0] / 2 * peak / mixture["sample"]
-            return ndimage.binary_fill_holes(ndimage.binary_opening(above, iterations=1)).astype(np.uint8)
-
         def figures(volume, labels_=None):
             if not mixture:
                 return measure(volume, labels_, inside, axis_radius, voxel_mm)
             peak = mixture_means(volume[inside], mixture)["sample"]
-            measured = measure(volume, sample_of(volume, peak=peak), inside, axis_radius, voxel_mm)
-            return dataclasses.replace(measured, peaks=dict.fromkeys(classes, peak))
+            above = volume > lowest[0] / 2 * peak / mixture["sample"]
+            sample = ndimage.binary_fill_holes(ndimage.binary_opening(above, iterations=1)).astype(np.uint8)
+            return dataclasses.replace(measure(volume, sample, inside, axis_radius, voxel_mm),
+                                       peaks=dict.fromkeys(classes, peak))
 
         volumes = {"real": real}
 
@@ -171,8 +166,7 @@ def fit(real, scan, *, labels=None, rounds: int = 3, gl=None, cl: CLContext | No
             start = figures(volumes["start"])
         target = figures(real, real_labels)
         search = _Search(knobs, start, target, run, scanned.objects)
-        if not sides_seen(sample_of(real, real_labels) > 0, sample_of(volumes["start"], simulated_labels) > 0,
-                          inside=inside):
+        if not sides_seen(start, target):
             search.kept.add("detector.blur_sigma_px")
             search.unidentified["detector.blur_sigma_px"] = (
                 "the sample shows no side in the field of view, and its faces along the axis are smeared by the "

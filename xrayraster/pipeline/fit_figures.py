@@ -20,7 +20,8 @@ column's distance from the rotation axis (voxels):
   plane), where a cone beam's FDK is sharp to the detector's resolution: a surface facing along the
   axis off the mid-plane is smeared by the cone's missing data over a width the geometry sets
   (Feldkamp's artefact: 0.25 mm for a blur of 0.05 mm, a sample wider than the grid, its top 1.9 mm
-  above the mid-plane at 37 mm from the source). :func:`sides_seen` says whether volumes show sides;
+  above the mid-plane at 37 mm from the source). ``side_share`` is the sides' share of the surface's
+  voxels, and :func:`sides_seen` says whether volumes show sides;
 * ``ring_rms``: in the air, per axial slice, the mean μ over each one-voxel ring about the rotation
   axis, less its running median over nine rings; the RMS of that over rings and slices (cm⁻¹), at
   the rings whose nine lie wholly in the air.
@@ -63,11 +64,13 @@ class Figures:
     edge_width_mm: float
     ring_rms: float
     edge_profile: tuple[tuple[float, ...], tuple[float, ...]] = ((), ())
+    side_share: float = math.nan
 
     def to_dict(self) -> dict:
         return {"peaks": {str(k): v for k, v in self.peaks.items()}, "noise_sigma": self.noise_sigma,
                 "nps": list(self.nps), "edge_width_mm": self.edge_width_mm, "ring_rms": self.ring_rms,
-                "edge_profile_mm": list(self.edge_profile[0]), "edge_profile": list(self.edge_profile[1])}
+                "edge_profile_mm": list(self.edge_profile[0]), "edge_profile": list(self.edge_profile[1]),
+                "side_share": self.side_share}
 
 
 def measure(volume: np.ndarray, labels: np.ndarray, inside: np.ndarray, axis_radius: np.ndarray,
@@ -86,9 +89,10 @@ def measure(volume: np.ndarray, labels: np.ndarray, inside: np.ndarray, axis_rad
     air = ~ndimage.binary_dilation(sample, iterations=AIR_MARGIN) & ndimage.binary_erosion(inside, iterations=1)
     pairs = air[1:] & air[:-1]
     noise = float((volume[1:] - volume[:-1])[pairs].std() / math.sqrt(2)) if pairs.sum() > 100 else math.nan
-    width, (distance, profile) = _edge(volume, sample, inside)
+    near, signed = _near_surface(sample, inside)
+    width, (distance, profile) = _edge(volume, near, signed)
     return Figures(peaks, noise, _nps(volume, air), width * voxel_mm, _ring_rms(volume, air, axis_radius),
-                   (tuple((distance * voxel_mm).tolist()), tuple(profile.tolist())))
+                   (tuple((distance * voxel_mm).tolist()), tuple(profile.tolist())), _side_share(near, signed))
 
 
 def _nps(volume: np.ndarray, air: np.ndarray) -> tuple[float, ...]:
@@ -110,16 +114,18 @@ def _nps(volume: np.ndarray, air: np.ndarray) -> tuple[float, ...]:
     return tuple((radial / radial.sum()).tolist())
 
 
-def sides_seen(*samples: np.ndarray, inside: np.ndarray) -> bool:
-    """Whether in every one of ``samples`` (bool volumes) the sides are :data:`MIN_SIDE_SHARE` of the
-    surface's voxels within ``inside`` (module docstring)."""
-    shares = []
-    for sample in samples:
-        near, distance = _near_surface(sample, inside)
-        gradient = np.gradient(distance)
-        side = gradient[0] ** 2 <= 0.5 * (gradient[0] ** 2 + gradient[1] ** 2 + gradient[2] ** 2)  # within 45°
-        shares.append((near & side).sum() / max(near.sum(), 1))
-    return min(shares) >= MIN_SIDE_SHARE
+def sides_seen(*figures: Figures) -> bool:
+    """Whether in every one of ``figures`` the sides are :data:`MIN_SIDE_SHARE` of the surface's
+    voxels (module docstring)."""
+    return all(f.side_share >= MIN_SIDE_SHARE for f in figures)
+
+
+def _side_share(near: np.ndarray, distance: np.ndarray) -> float:
+    """The share of the ``near`` voxels whose surface normal (the ``distance``'s gradient) lies within
+    45° of the orbit's plane."""
+    gradient = np.gradient(distance)
+    side = gradient[0] ** 2 <= 0.5 * (gradient[0] ** 2 + gradient[1] ** 2 + gradient[2] ** 2)
+    return float((near & side).sum() / max(near.sum(), 1))
 
 
 def _near_surface(sample: np.ndarray, inside: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -132,10 +138,9 @@ def _near_surface(sample: np.ndarray, inside: np.ndarray) -> tuple[np.ndarray, n
     return near, distance
 
 
-def _edge(volume: np.ndarray, sample: np.ndarray, inside: np.ndarray) -> tuple[float, tuple]:
-    """σ (voxels) of the error function fitted to μ against the signed distance from the sample's
-    surface, and that profile (distances in voxels, mean μ)."""
-    near, distance = _near_surface(sample, inside)
+def _edge(volume: np.ndarray, near: np.ndarray, distance: np.ndarray) -> tuple[float, tuple]:
+    """σ (voxels) of the error function fitted to μ of the ``near`` voxels against their signed
+    ``distance`` from the sample's surface, and that profile (distances in voxels, mean μ)."""
     if near.sum() < 50:
         return math.nan, (np.zeros(0), np.zeros(0))
     d, v = distance[near], volume[near]
