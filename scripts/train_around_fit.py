@@ -60,6 +60,8 @@ SCANNER = ("source.kvp", "source.mas", "source.focal_spot_mm", "detector.flat_fi
 SCANNER_SHARE = 0.1
 #: The share of each fitted density the training set draws within (module docstring).
 DENSITY_SHARE = 0.02
+#: The fitted weave's keys that are shares (below 1).
+SHARES = ("weave.weft_width_fraction", "weave.warp_width_fraction", "weave.weft_share")
 SHIFTED = ROOT / "examples" / "ml_shifted.toml"
 TRAINING = ROOT / "examples" / "ml_train_scanner.toml"
 START = ROOT / "examples" / "scan_small.toml"
@@ -141,6 +143,10 @@ def training_table(scanner_randomised: dict, fitted_name: str, result, unpinned:
             vary[key] = prior[key]
         elif value:  # a knob fitted to 0 stays 0 (a share of nothing)
             vary[key] = {"around": DENSITY_SHARE if key.startswith("materials.") else SCANNER_SHARE}
+            if key in SHARES:  # a share of a spacing or of the stack stays below 1
+                vary[key]["clip"] = [0.0, 0.99]
+    if result.weave.get("tracers"):  # the tracers the fit found, as the fitted file has them
+        vary.pop("weave.materials.tracers", None)
     if unpinned == "prior" and "detector.blur_sigma_px" in result.unidentified:
         vary["source.focal_spot_mm"] = prior["source.focal_spot_mm"]
     table["vary"] = vary

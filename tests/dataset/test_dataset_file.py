@@ -78,9 +78,13 @@ def test_around_is_the_bases_value_plus_or_minus_a_share():
     values = np.array([draw(dataset, i).values["geometry.source_to_origin"] for i in range(200)])
     assert 31.5 <= values.min() < 32.0 and 38.0 < values.max() <= 38.5  # 35 ± 3.5
     assert dataset.vary["source.photons_per_mm2_at_1m"] == Uniform(0.5e7, 1.5e7)
+    clipped = load_dataset_file(table(vary={"geometry.source_to_origin": {"around": 0.1, "clip": [30.0, 36.0]}}))
+    assert clipped.vary["geometry.source_to_origin"] == Uniform(31.5, 36.0)  # 35 ± 3.5, cut at 36
     for vary, message in [({"source.kvp": {"around": 0.1}}, "needs a non-zero number for 'source.kvp' in the base"),
                           ({"geometry.num_views": {"around": 1.5}}, "below 1"),
-                          ({"geometry.num_views": {"around": 0.1, "clip": [1, 2]}}, "takes no other keys")]:
+                          ({"geometry.num_views": {"around": 0.1, "weights": [1]}}, "takes only clip besides"),
+                          ({"geometry.source_to_origin": {"around": 0.1, "clip": [0, 30]}}, "leaves nothing of"),
+                          ({"geometry.source_to_origin": {"around": 0.1, "clip": [40, 30]}}, "empty range")]:
         with pytest.raises(ConfigError, match=message):
             load_dataset_file(table(vary=vary))
 

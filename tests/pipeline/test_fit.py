@@ -76,18 +76,37 @@ def test_with_region_labels_every_hidden_value_is_found(real, capsys):
     assert abs(report["relative_errors"]["peaks"]["fitted"]) < 0.02
     assert abs(report["relative_errors"]["noise_sigma"]["fitted"]) < 0.10
     assert abs(report["relative_errors"]["edge_width_mm"]["fitted"]) < 0.10
-    assert set(report["not_fitted"]) == {"source.focal_spot_mm", "detector.electronic_noise"}
+    assert set(report["not_fitted"]) == {"source.focal_spot_mm", "detector.electronic_noise", "weave.sample.seed"}
+    for key, value in start_table()["weave"].items():  # the labels are the start cell's: it stays
+        if not isinstance(value, dict):
+            assert report["parameters"][f"weave.{key}"]["fitted"] == pytest.approx(value), key
+    assert report["weave"]["agreement"]["fitted"] == 1.0 and report["weave"]["tracers"] == []
     assert report_png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     # The fitted file is a scan file: it loads (its paths made absolute) and names its report.
     assert xr.pipeline.load_scan_file(out).options.seed == 5
     assert report_json.name in out.read_text().splitlines()[0]
 
 
-def test_without_labels_the_scanner_is_found_and_one_factor_for_the_materials(real):
+def test_without_labels_the_cell_is_fitted_and_then_each_material(real):
     result = xr.fit(real / "real.tif", real / "start.toml")
     fitted = dict(result.parameters)
     assert fitted["source.mas"][1] == pytest.approx(0.0002, rel=0.15)
     assert fitted["detector.blur_sigma_px"][1] == pytest.approx(0.8, abs=0.15)
+    for key in ("weft_spacing", "warp_spacing", "thickness"):  # the hidden cell is the start's
+        assert fitted[f"weave.{key}"][1] == pytest.approx(fitted[f"weave.{key}"][0], rel=0.05), key
+    # Each material under the fitted cell's labels: the matrix 6 % denser, the yarns as they were.
+    assert fitted["materials.matrix.density"][1] == pytest.approx(1.15, rel=0.04)
+    for name in ("weft_carbon", "warp_carbon"):
+        assert fitted[f"materials.{name}.density"][1] == pytest.approx(fitted[f"materials.{name}.density"][0], rel=0.04)
+    assert "materials.*.density" not in result.unidentified
+    assert result.weave["tracers"] == []  # carbon only: no yarn is bright
+    assert abs(result.errors["peaks"][1]) < 0.02
+
+
+def test_without_labels_and_the_cell_kept_one_factor_is_fitted_for_the_materials(real):
+    result = xr.fit(real / "real.tif", real / "start.toml", weave=False)
+    fitted = dict(result.parameters)
+    assert not any(key.startswith("weave.") for key in fitted) and not result.weave
     factors = {key: b / a for key, (a, b) in fitted.items() if key.endswith(".density")}
     assert max(factors.values()) - min(factors.values()) < 1e-9  # one factor for every material
     assert "materials.*.density" in result.unidentified

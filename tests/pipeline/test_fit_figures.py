@@ -5,8 +5,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from xrayraster.pipeline.fit import mixture_means
-from xrayraster.pipeline.fit_figures import measure, sides_seen
+from xrayraster.pipeline.fit_figures import measure, mixture_means, sides_seen
 
 SHAPE = (24, 64, 64)
 

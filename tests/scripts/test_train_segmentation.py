@@ -117,9 +117,10 @@ def test_the_run_around_a_fit_tells_the_fit_only_what_a_user_knows(torch, gl, cl
     """scripts/train_around_fit.py --quick (docs/ml.md, "Training around a fit"): the scan file the fit
     starts from takes of the shifted scan only its scanner's settings and its holder (not its mAs,
     focal spot, blur, gain variation, tracer or weave); the training file is ml_train_scanner.toml's,
-    its scanner's ranges replaced by ±10 % of each fitted knob (±2 % of each density) about the
-    fitted file (a knob the fit could not pin down: of the start file's value); the network is
-    trained and scored on the shifted set."""
+    its scanner's and weave's ranges replaced by ±10 % of each fitted knob and of the fitted cell's
+    keys (±2 % of each density) about the fitted file (a knob the fit could not pin down: of the start
+    file's value), which carries the tracer the fit found; the network is trained and scored on the
+    shifted set."""
     import tomllib
 
     from xrayraster.dataset.dataset_file import draw, load_dataset_file
@@ -153,7 +154,16 @@ def test_the_run_around_a_fit_tells_the_fit_only_what_a_user_knows(torch, gl, cl
     for name in ("weft_carbon", "warp_carbon", "matrix"):
         density = fitted["materials"][name]["density"]
         assert resolved[f"materials.{name}.density"] == Uniform(density * 0.98, density * 1.02)
-    for key, value in train["vary"].items():  # the weave and the tracers as ml_train_scanner.toml draws them
+    for key in ("weft_spacing", "warp_spacing", "thickness"):  # the cell ±10 % about the fitted one
+        value = fitted["weave"][key]
+        assert resolved[f"weave.{key}"] == Uniform(value * 0.9, value * 1.1)
+    for key in ("weft_width_fraction", "warp_width_fraction", "weft_share"):  # shares stay below 1
+        value = fitted["weave"][key]
+        assert resolved[f"weave.{key}"] == Uniform(value * 0.9, min(value * 1.1, 0.99))
+    # The shifted scan's glass weft found, in the fitted file, and drawn as it is there.
+    assert [t["yarn"] for t in fitted["weave"]["materials"]["tracers"]] == ["weft_c0_l1_y1"]
+    assert "weave.materials.tracers" not in train["vary"]
+    for key, value in train["vary"].items():  # the rest (distortions, seeds, split) as ml_train_scanner.toml's
         assert key in report["parameters"] or value == scanner[key]
     run = json.loads((tmp_path / "run.json").read_text())
     assert 0.0 <= run["training"]["results"]["shifted"]["network"]["mean_dice"] <= 1.0

@@ -26,6 +26,9 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--labels", type=Path, metavar="L.tif",
                         help="region labels of the real volume on the same grid (the scan's label values, 0 the air); "
                              "without them the classes come from a Gaussian mixture of the real volume's values")
+    parser.add_argument("--keep-weave", action="store_true",
+                        help="keep the [weave] cell as the file gives it (default: its spacings, thickness, yarn widths "
+                             "and the weft's share are fitted to the real volume, and bright tracer yarns found)")
     parser.add_argument("--rounds", type=positive_int, default=3, help="rounds of updates at most (default 3)")
     parser.add_argument("-v", "--verbose", action="store_true")
     parser.set_defaults(run=run)
@@ -39,10 +42,16 @@ def run(args) -> int:
     check_outputs([args.out, *report_paths(args.out)], inputs, main_is_tiff=False)
     real, _ = read_tiff_file(args.real, "the real volume")
     labels = read_tiff_file(args.labels, "--labels")[0] if args.labels is not None else None
-    result = fit(real, args.scan, labels=labels, rounds=args.rounds)
+    result = fit(real, args.scan, labels=labels, rounds=args.rounds, weave=not args.keep_weave)
     written = write_fit(result, args.out, real_name=str(args.real), scan_name=str(args.scan))
     rows = [f"  {key}: {start:.6g} → {fitted:.6g}" for key, (start, fitted) in result.parameters.items()]
     errors = [f"  {name}: {_percent(a)} → {_percent(b)}" for name, (a, b) in result.errors.items()]
+    if result.weave:
+        agreement = result.weave["agreement"]
+        rows.append(f"  the cell's labels agree with the real classes in {agreement['start']:.1%} → "
+                    f"{agreement['fitted']:.1%} of the field of view")
+        rows += [f"  tracer {t['yarn']}: {t['fibre']} fibres at {t['fibre_fraction']:.3g} of the yarn"
+                 for t in result.weave["tracers"]]
     print(f"{args.out}: {'converged' if result.converged else 'not converged; the best run kept'} after "
           f"{len(result.runs)} runs in {result.seconds:.0f} s\n"
           "fitted:\n" + "\n".join(rows) + "\nrelative errors of the figures, start → fitted:\n" + "\n".join(errors)

@@ -11,9 +11,10 @@ plain value, which fixes the key (:class:`Fixed`):
 - ``{ integer = [a, b] }``: an integer uniform in [a, b], both ends included, a < b;
 - ``{ choice = [v1, v2, ...], weights = [w1, w2, ...] }``: one of the values (any TOML value:
   numbers, strings, arrays, tables), with the given weights (default equal);
-- ``{ around = r }``: ±r (a share, 0 < r < 1) of the base scan's own value of the key, uniform:
-  ``{ uniform = [v·(1 − r), v·(1 + r)] }``, the form it is read as (``dataset_file`` resolves it
-  against the base; around a fitted scan file, docs/fit.md).
+- ``{ around = r, clip = [lo, hi] }``: ±r (a share, 0 < r < 1) of the base scan's own value of the
+  key, uniform: ``{ uniform = [v·(1 − r), v·(1 + r)] }``, the form it is read as (``dataset_file``
+  resolves it against the base; around a fitted scan file, docs/fit.md); with ``clip`` that range
+  cut to [lo, hi] (a fraction whose +r would pass 1, say).
 
 Each distribution's ``to_dict()`` is the table it was read from, so
 ``distribution_from(d.to_dict(), ...) == d``; the draws are plain Python values (float, int, or a
@@ -142,8 +143,9 @@ def resolved_around(value, key: str, base_value, where: str):
     if not (isinstance(value, dict) and AROUND in value):
         return value
     field = f"'{key}' around"
-    if set(value) != {AROUND}:
-        raise ConfigError(f"{where}: {field} takes no other keys (got {', '.join(sorted(value))}); write {{ around = 0.1 }}")
+    if not set(value) <= {AROUND, "clip"}:
+        raise ConfigError(f"{where}: {field} takes only clip besides (got {', '.join(sorted(value))}); write "
+                          "{ around = 0.1 } or { around = 0.1, clip = [0.0, 1.0] }")
     share = fields.number(value[AROUND], field, where, positive=True)
     if share >= 1:
         raise ConfigError(f"{where}: {field} = {show(share)} is a share of the base's value below 1 (0.1: ±10 %)")
@@ -151,6 +153,13 @@ def resolved_around(value, key: str, base_value, where: str):
         raise ConfigError(f"{where}: {field} needs a non-zero number for '{key}' in the base scan, which gives "
                           f"{show(base_value) if base_value is not None else 'none'}; give {{ uniform = [a, b] }} instead")
     low, high = sorted((base_value * (1 - share), base_value * (1 + share)))
+    if "clip" in value:
+        lo, hi = _pair(value["clip"], f"{field} clip", where, form="[low, high]")
+        _increasing(lo, hi, f"{field} clip", where, "[low, high]")
+        low, high = max(low, lo), min(high, hi)
+        if not low < high:
+            raise ConfigError(f"{where}: {field} clip = {show(value['clip'])} leaves nothing of "
+                              f"[{show(base_value * (1 - share))}, {show(base_value * (1 + share))}]; widen the clip")
     return {"uniform": [float(low), float(high)]}
 
 

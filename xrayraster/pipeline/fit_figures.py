@@ -31,7 +31,7 @@ column's distance from the rotation axis (voxels):
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import ndimage, optimize, special
@@ -65,26 +65,22 @@ class Figures:
     ring_rms: float
     edge_profile: tuple[tuple[float, ...], tuple[float, ...]] = ((), ())
     side_share: float = math.nan
+    tracers: dict[str, float] = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         return {"peaks": {str(k): v for k, v in self.peaks.items()}, "noise_sigma": self.noise_sigma,
                 "nps": list(self.nps), "edge_width_mm": self.edge_width_mm, "ring_rms": self.ring_rms,
                 "edge_profile_mm": list(self.edge_profile[0]), "edge_profile": list(self.edge_profile[1]),
-                "side_share": self.side_share}
+                "side_share": self.side_share, **({"tracer_peaks": self.tracers} if self.tracers else {})}
 
 
 def measure(volume: np.ndarray, labels: np.ndarray, inside: np.ndarray, axis_radius: np.ndarray,
-            voxel_mm: float) -> Figures:
+            voxel_mm: float, tracers: dict | None = None) -> Figures:
     """The :class:`Figures` of ``volume`` with its ``labels``, field of view ``inside`` (bool, as the
-    volume), the columns' ``axis_radius`` (rows, cols; voxels) and voxels of ``voxel_mm`` (the edge's unit)."""
+    volume), the columns' ``axis_radius`` (rows, cols; voxels) and voxels of ``voxel_mm`` (the edge's unit);
+    ``tracers`` (yarn → bool volume): the voxels each tracer's peak is the median μ of."""
     volume = np.asarray(volume, dtype=np.float64)
-    peaks = {}
-    for label in (int(v) for v in np.unique(labels) if v != 0):
-        region = (labels == label) & inside
-        core = ndimage.binary_erosion(region, iterations=PEAK_EROSION)
-        core = core if core.sum() >= MIN_VOXELS else region  # a region too thin to erode: all of it
-        if core.sum() >= MIN_VOXELS:
-            peaks[label] = float(np.median(volume[core]))
+    peaks = class_peaks(volume, labels, inside)
     sample = labels > 0
     air = ~ndimage.binary_dilation(sample, iterations=AIR_MARGIN) & ndimage.binary_erosion(inside, iterations=1)
     pairs = air[1:] & air[:-1]
@@ -92,7 +88,22 @@ def measure(volume: np.ndarray, labels: np.ndarray, inside: np.ndarray, axis_rad
     near, signed = _near_surface(sample, inside)
     width, (distance, profile) = _edge(volume, near, signed)
     return Figures(peaks, noise, _nps(volume, air), width * voxel_mm, _ring_rms(volume, air, axis_radius),
-                   (tuple((distance * voxel_mm).tolist()), tuple(profile.tolist())), _side_share(near, signed))
+                   (tuple((distance * voxel_mm).tolist()), tuple(profile.tolist())), _side_share(near, signed),
+                   {yarn: float(np.median(volume[core])) for yarn, core in (tracers or {}).items() if core.any()})
+
+
+def class_peaks(volume: np.ndarray, labels: np.ndarray, inside: np.ndarray,
+                erosion: int = PEAK_EROSION) -> dict[int, float]:
+    """Each label's ``peaks`` figure (module docstring) in ``volume``, over the voxels ``inside``, its
+    regions eroded by ``erosion`` voxels."""
+    peaks = {}
+    for label in (int(v) for v in np.unique(labels) if v != 0):
+        region = (labels == label) & inside
+        core = ndimage.binary_erosion(region, iterations=erosion)
+        core = core if core.sum() >= MIN_VOXELS else region  # a region too thin to erode: all of it
+        if core.sum() >= MIN_VOXELS:
+            peaks[label] = float(np.median(volume[core]))
+    return peaks
 
 
 def _nps(volume: np.ndarray, air: np.ndarray) -> tuple[float, ...]:
@@ -180,3 +191,24 @@ def _ring_rms(volume: np.ndarray, air: np.ndarray, axis_radius: np.ndarray) -> f
         residues.append(profile[half:len(profile) - half][whole] - np.median(windows[whole], axis=1))
     values = np.concatenate(residues) if residues else np.zeros(0)
     return float(np.sqrt(np.mean(values**2))) if values.size else math.nan
+
+
+def mixture_means(values: np.ndarray, peaks: dict[int, float], iterations: int = 100) -> dict[int, float]:
+    """The means of a 1-D Gaussian mixture of ``values`` (EM on a histogram of 1024 bins), a
+    component a class started at its ``peaks`` value, by class."""
+    counts, edges = np.histogram(values, bins=1024)
+    centres = (edges[:-1] + edges[1:]) / 2
+    labels = sorted(peaks, key=peaks.get)
+    means = np.array([peaks[k] for k in labels], dtype=np.float64)
+    gaps = np.diff(means)
+    spread = np.full(len(means), max(float(gaps[gaps > 0].min()) / 4 if (gaps > 0).any() else 0.0,
+                                     float(np.std(values)) / 20, 1e-6))
+    share = np.full(len(means), 1 / len(means))
+    for _ in range(iterations):
+        density = share * np.exp(-0.5 * ((centres[:, None] - means) / spread) ** 2) / spread
+        weight = density / np.maximum(density.sum(axis=1, keepdims=True), 1e-300) * counts[:, None]
+        total = np.maximum(weight.sum(axis=0), 1e-12)
+        means = (weight * centres[:, None]).sum(axis=0) / total
+        spread = np.maximum(np.sqrt((weight * (centres[:, None] - means) ** 2).sum(axis=0) / total), 1e-6)
+        share = total / total.sum()
+    return {k: float(m) for k, m in zip(labels, means)}
