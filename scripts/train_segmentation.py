@@ -24,7 +24,10 @@ methods users try first (docs/ml.md).
    nnU-Net's (:func:`augmentation`): each patch read 1.25 times as wide and resampled to
    ``--patch``³ at a scale of 0.85-1.15 along each axis, its intensities scaled (x0.85-1.15),
    shifted (±0.1), given a gamma (0.8-1.25), blurred (σ 0.5-1 voxel) and given noise (σ up to
-   0.05), each with a probability of 0.3-0.5.
+   0.05), each with a probability of 0.3-0.5. ``--scale LO,HI`` draws the scale in LO-HI instead
+   (a scale s shows the patch's content 1/s as large; nnU-Net draws 0.7-1.4), each patch read HI
+   times as wide (at least 1.25); without ``--augment``, the resampling is all the augmentation: a cell's size
+   varies, its attenuation steps stay as built.
 3. **Scores.** Each test volume segmented whole (:func:`xrayraster.ml.predict_volume`, windows
    overlapping by half) and its largest body kept (:func:`xrayraster.ml.largest_component`: the
    specimen is one body; every method's labels get the same step, and the network's are also scored
@@ -43,6 +46,7 @@ out/train_segmentation_quick.json and the plots in out/).
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import json
 import time
@@ -59,7 +63,8 @@ from .common import OUT, ROOT, announce, conclude, cores, outputs, parser, pyplo
 NAMES = {1: "matrix", 2: "weft", 3: "warp"}  # the scored labels
 UNFILTERED = "network, every body kept"  # the network's labels scored without largest_component
 SCORED = tuple(NAMES)
-READ = 1.25  # an augmented patch is read this many times as wide, then resampled (augmentation)
+SCALE = (0.85, 1.15)  # --augment's scales along each axis, unless --scale is given (augmentation)
+READ = 1.25  # a resampled patch is read at least this many times as wide (augmentation)
 NORMALIZE = xr.ml.MaterialScale()  # the network's input (module docstring)
 BUILDS = {  # folder under --out: (dataset file in examples/, added to its seed, samples with --quick)
     "train": ("ml_train.toml", 0, 9),  # --quick: the 9th sample is the first of the test split
@@ -77,6 +82,8 @@ def main(argv=None) -> int:
     ap.add_argument("--channels", default="16,32,64,128",
                     help="the U-Net's channels at each level, comma-separated (default 16,32,64,128)")
     ap.add_argument("--augment", action="store_true", help="augment each patch (module docstring; off by default)")
+    ap.add_argument("--scale", type=_scales, help="LO,HI: resample each patch at a scale drawn in LO-HI along each "
+                    "axis (module docstring; --augment alone: 0.85,1.15)")
     ap.add_argument("--train-file", default=BUILDS["train"][0],
                     help="the training set's dataset file: a name in examples/ (default ml_train.toml) or a path")
     ap.add_argument("--out", type=Path, help="the builds and model.pt (default out/ml; --quick: out/ml_quick)")
@@ -102,11 +109,12 @@ def main(argv=None) -> int:
         builds[name] = folder / name
         say(f"build {name}: {dataset.count} samples in {seconds[f'build {name}']:.0f} s (0 s: built before)")
 
-    read = round(patch * READ) if args.augment else patch
+    scales = args.scale or (SCALE if args.augment else None)
+    read = round(patch * max(READ, scales[1])) if scales else patch
     train = xr.ml.PatchDataset(builds["train"], read, split="train", patches_per_sample=max(8, iterations),
                                flips=True, seed=args.seed, normalize=NORMALIZE).prepare()
     classes = max(train.dataset.labels) + 1
-    augment = augmentation(patch, args.seed) if args.augment else None
+    augment = augmentation(patch, args.seed, scales, args.augment) if scales else None
     channels = tuple(int(c) for c in args.channels.split(","))
     start = time.perf_counter()
     model, losses = fit(torch, train, classes, channels, iterations, args.batch, args.seed, augment)
@@ -128,7 +136,7 @@ def main(argv=None) -> int:
     plots = curve_plot(losses, args.plots_dir / "ml_curve.png"), slices_plot(examples["shifted"], results["shifted"],
                                                                              args.plots_dir / "ml_slices.png")
     payload = {"command": command, "machine": machine, "iterations": iterations, "batch": args.batch, "patch": patch,
-               "seed": args.seed, "channels": channels, "train_file": args.train_file, "augment": args.augment,
+               "seed": args.seed, "channels": channels, "train_file": args.train_file, "augment": args.augment, "scale": scales,
                "normalize": repr(NORMALIZE), "classes": classes, "train_samples": len(train.samples),
                "seconds": seconds,
                "loss_first_20": float(np.mean(losses[:20])), "loss_last_20": float(np.mean(losses[-20:])),
@@ -176,21 +184,35 @@ def fit(torch, train, classes: int, channels: tuple, iterations: int, batch: int
     return model, losses
 
 
-def augmentation(patch: int, seed: int):
+def augmentation(patch: int, seed: int, scales: tuple[float, float] = SCALE, intensities: bool = True):
     """The augmentation of the module docstring: MONAI dictionary transforms of ``image`` (1, z, y, x)
-    and ``label`` (1, z, y, x) read ``READ`` times ``patch`` wide, giving ``patch``³; seeded."""
+    and ``label`` (1, z, y, x) read wider than ``patch``, giving ``patch``³, at ``scales`` (low,
+    high) along each axis, then, with ``intensities``, the intensity transforms; seeded."""
     from monai import transforms as t
 
+    resample = t.RandAffined(("image", "label"), spatial_size=(patch,) * 3, prob=1.0,
+                             scale_range=((scales[0] - 1, scales[1] - 1),) * 3,  # MONAI adds 1
+                             mode=("bilinear", "nearest"), padding_mode="zeros")
     sigma = (0.5, 1.0)
-    return t.Compose([
-        t.RandAffined(("image", "label"), spatial_size=(patch,) * 3, prob=1.0, scale_range=(0.15,) * 3,
-                      mode=("bilinear", "nearest"), padding_mode="zeros"),
+    steps = [resample] + ([
         t.RandScaleIntensityd("image", factors=0.15, prob=0.5),
         t.RandShiftIntensityd("image", offsets=0.1, prob=0.5),
         t.RandAdjustContrastd("image", gamma=(0.8, 1.25), prob=0.3),
         t.RandGaussianSmoothd("image", sigma_x=sigma, sigma_y=sigma, sigma_z=sigma, prob=0.3),
         t.RandGaussianNoised("image", std=0.05, prob=0.3),
-    ]).set_random_state(seed)
+    ] if intensities else [])
+    return t.Compose(steps).set_random_state(seed)
+
+
+def _scales(text: str) -> tuple[float, float]:
+    """--scale's LO,HI, checked."""
+    try:
+        low, high = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--scale takes two numbers, LO,HI (say 0.7,1.4), not {text!r}") from None
+    if not 0 < low <= high:
+        raise argparse.ArgumentTypeError(f"--scale {text}: LO,HI must satisfy 0 < LO <= HI (say 0.7,1.4)")
+    return low, high
 
 
 def augmented(torch, augment, image, labels):

@@ -78,7 +78,8 @@ def test_the_tracer_yarn_is_named_and_none_without_one(real, gl):
     scan = scan_with(HIDDEN)
     use = np.ones(real.shape, bool)
     smoothed = ndimage.gaussian_filter(real, 0.7)
-    found = find_tracers(smoothed, dict(MU), use, scan, gl)
+    sample = scan.sample_scene()
+    found = find_tracers(smoothed, dict(MU), use, sample, scan.volume, gl)
     assert [t.yarn for t in found] == [TRACER]
     assert found[0].share > 0.8
     # Its peak is taken over its own bright voxels (a thin yarn, blurred: brighter than any other yarn
@@ -87,10 +88,10 @@ def test_the_tracer_yarn_is_named_and_none_without_one(real, gl):
     assert found[0].real.any() and inside_it[found[0].real].mean() > 0.9
     assert MU[YARN] + 2 * (MU[YARN] - MU[MATRIX]) < np.median(real[found[0].real]) < TRACER_MU
     plain = np.minimum(smoothed, MU[YARN] + 0.05)
-    assert find_tracers(plain, dict(MU), use, scan, gl) == []
+    assert find_tracers(plain, dict(MU), use, sample, scan.volume, gl) == []
     speck = plain.copy()
     speck[18, 48, 40:44] = TRACER_MU  # four bright voxels: a speck, not a yarn
-    assert find_tracers(speck, dict(MU), use, scan, gl) == []
+    assert find_tracers(speck, dict(MU), use, sample, scan.volume, gl) == []
 
 
 def test_user_labels_set_the_classes(real, gl):

@@ -167,3 +167,13 @@ def test_the_run_around_a_fit_tells_the_fit_only_what_a_user_knows(torch, gl, cl
         assert key in report["parameters"] or value == scanner[key]
     run = json.loads((tmp_path / "run.json").read_text())
     assert 0.0 <= run["training"]["results"]["shifted"]["network"]["mean_dice"] <= 1.0
+
+
+@pytest.mark.parametrize("scale", ["1.4,0.7", "0,1.4", "0.7"])
+def test_a_bad_scale_range_is_refused_before_any_work(scale):
+    """--scale LO,HI needs 0 < LO <= HI: anything else is argparse's one-line error (exit 2), before
+    torch is imported or anything is built."""
+    done = subprocess.run([sys.executable, "-m", "scripts.train_segmentation", "--scale", scale], cwd=ROOT,
+                          capture_output=True, text=True)
+    assert done.returncode == 2 and "--scale" in done.stderr and "0.7,1.4" in done.stderr, done.stderr
+    assert "Traceback" not in done.stderr

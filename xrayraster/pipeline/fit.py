@@ -56,6 +56,7 @@ from ..physics.scatter import detector_layout
 from ..recon.fdk import fdk
 from ..recon.fdk_weights import footprint_radius
 from ..recon.opencl import CLContext
+from ..scene.scene import Scene
 from ..simulate.renderer import Renderer
 from .fit_figures import Figures, class_peaks, measure, mixture_means, sides_seen
 from .fit_search import TOLERANCES, Knobs, Search, relative_errors
@@ -169,10 +170,10 @@ def fit(real, scan, *, labels=None, rounds: int = 3, weave: bool = True, gl=None
             start = dataclasses.replace(lumped, peaks=start.peaks) if weave and loaded.weave is not None else lumped
         first = start
         if weave and loaded.weave is not None:
-            woven, found = _fit_weave(real, real_labels, inside, start, loaded, renderer.gl)
+            woven, found, scene = _fit_weave(real, real_labels, inside, start, loaded, sample.scene, renderer.gl)
             tracers.extend(found)
             classes.clear()  # the peaks are now each class's, under the fitted cell's labels
-            sample = _Rendered.of(woven.scan, renderer)
+            sample = _Rendered.of(woven.scan, renderer, scene)
             knobs = dataclasses.replace(knobs, tracers=dict.fromkeys((t.yarn for t in tracers), START_FRACTION),
                                         matrix=sample.matrix)
             first = run(knobs)
@@ -208,21 +209,25 @@ def fit(real, scan, *, labels=None, rounds: int = 3, weave: bool = True, gl=None
                      _weave_report(woven, tracers, best_knobs))
 
 
-def _fit_weave(real, real_labels, inside, start: Figures, loaded: ScanFile, gl) -> tuple[WeaveFit, list]:
+def _fit_weave(real, real_labels, inside, start: Figures, loaded: ScanFile, sample: Scene,
+               gl) -> tuple[WeaveFit, list, Scene]:
     """The weave's cell fitted (:func:`~xrayraster.pipeline.fit_weave.fit_weave`) from the start's
-    peaks of each class (its exact labels'), and, where the file names none, its tracers found
-    (:mod:`~xrayraster.pipeline.fit_tracer`)."""
-    class_of = class_of_labels(loaded)
+    peaks of each class (its exact labels', ``sample`` the start's scene), and, where the file names
+    none, its tracers found (:mod:`~xrayraster.pipeline.fit_tracer`); with the fitted sample's scene."""
+    class_of = class_of_labels(sample)
     peaks = {AIR: 0.0}
     for cls in (MATRIX, YARN):
         values = [start.peaks[label] for label, c in class_of.items() if c == cls and label in start.peaks]
         peaks[cls] = float(np.mean(values)) if values else 0.0
-    woven = fit_weave(loaded, real, inside, peaks, gl, real_labels)
+    woven = fit_weave(loaded, real, inside, peaks, gl, real_labels, sample)
+    scene = woven.scan.sample_scene()
     tracers = []
     if not loaded.weave.materials.tracers:
-        tracers = find_tracers(woven.smoothed, woven.means, inside, woven.scan, gl)
+        tracers = find_tracers(woven.smoothed, woven.means, inside, scene, loaded.volume, gl)
+    if tracers:  # a tracer yarn's material, and its place last among the objects (it wins priority ties)
         woven = dataclasses.replace(woven, scan=with_tracers(woven.scan, tracers))
-    return woven, tracers
+        scene = woven.scan.sample_scene()
+    return woven, tracers, scene
 
 
 def _weave_report(woven: WeaveFit | None, tracers: list, knobs: "Knobs") -> dict:
@@ -236,22 +241,24 @@ def _weave_report(woven: WeaveFit | None, tracers: list, knobs: "Knobs") -> dict
 
 @dataclass(frozen=True)
 class _Rendered:
-    """A scan file's sample as the fit runs it: the scene with its mount (``scanned``), its path
+    """A scan file's sample as the fit runs it: its scene, that with its mount (``scanned``), its path
     lengths, its labels on the grid, the scene's material of each tracer yarn and its matrix."""
 
-    scanned: object
+    scene: Scene
+    scanned: Scene
     lengths: np.ndarray
     labels: np.ndarray
     tracers: dict
     matrix: object
 
     @classmethod
-    def of(cls, loaded: ScanFile, renderer: Renderer) -> "_Rendered":
-        scene = loaded.sample_scene()
+    def of(cls, loaded: ScanFile, renderer: Renderer, scene: Scene | None = None) -> "_Rendered":
+        """``loaded``'s sample (its ``scene`` where meshed already) rendered and voxelized."""
+        scene = scene if scene is not None else loaded.sample_scene()
         scanned = loaded.with_mount(scene)
         by_name = {o.name: o.material for o in scene.objects}
         names = [t.yarn for t in loaded.weave.materials.tracers] if loaded.weave is not None else []
-        return cls(scanned, renderer.path_lengths_all(scanned, progress=False),
+        return cls(scene, scanned, renderer.path_lengths_all(scanned, progress=False),
                    voxelize(scene, loaded.volume, context=renderer.gl).data,
                    {name: by_name[name] for name in names if name in by_name}, by_name.get("matrix"))
 

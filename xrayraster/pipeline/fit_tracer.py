@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
+from ..core.volume import VolumeGeometry
 from ..gl.voxelize import voxelize
 from ..io.scan_file import ScanFile
 from ..scene.scene import Scene
@@ -48,10 +49,11 @@ class FoundTracer:
     simulated: np.ndarray = dataclasses.field(repr=False)
 
 
-def find_tracers(smoothed: np.ndarray, means: dict[int, float], use: np.ndarray, scan: ScanFile,
-                 gl) -> list[FoundTracer]:
-    """The tracer yarns of ``scan``'s weave in the real volume ``smoothed`` (cm⁻¹, smoothed) whose
-    classes' peaks are ``means`` (class → μ), over the voxels of ``use`` (module docstring)."""
+def find_tracers(smoothed: np.ndarray, means: dict[int, float], use: np.ndarray, sample: Scene,
+                 volume: VolumeGeometry, gl) -> list[FoundTracer]:
+    """The tracer yarns of a woven ``sample`` (a scan's sample scene, on the grid ``volume``) in the
+    real volume ``smoothed`` (cm⁻¹, smoothed) whose classes' peaks are ``means`` (class → μ), over
+    the voxels of ``use`` (module docstring)."""
     step = means[YARN] - means[MATRIX]
     if step <= 0:
         return []
@@ -63,11 +65,11 @@ def find_tracers(smoothed: np.ndarray, means: dict[int, float], use: np.ndarray,
     bright = (sizes >= MIN_VOXELS)[bodies] & bright
     if not bright.any():
         return []
-    objects = scan.sample_scene().objects
+    objects = sample.objects
     yarns = Scene()  # each object its own label: which yarn a voxel is in
     for i, o in enumerate(objects):
         yarns.add(o.mesh, o.material, label=i + 1, priority=o.priority, name=o.name)
-    owner = voxelize(yarns, scan.volume, context=gl).data
+    owner = voxelize(yarns, volume, context=gl).data
     total = np.bincount(owner.ravel(), minlength=len(objects) + 1)
     hits = np.bincount(owner[bright], minlength=len(objects) + 1)
     found = []

@@ -32,6 +32,7 @@ from scipy import ndimage, optimize
 from ..gl.voxelize import voxelize
 from ..core.volume import VolumeGeometry
 from ..io.scan_file import ScanFile, mesh_resolution_for
+from ..scene.scene import Scene
 from .fit_figures import class_peaks
 
 #: The cell's keys the fit moves (``[weave]``'s names), in the order of the search's first step.
@@ -93,11 +94,11 @@ class WeaveFit:
                 "class_peaks": {name: self.means[cls] for name, cls in (("matrix", MATRIX), ("yarn", YARN))}}
 
 
-def class_of_labels(scan: ScanFile) -> dict[int, int]:
-    """Each label of the scan's sample → its class: the matrix's, the yarns' (a label the
-    matrix's voids take is air)."""
+def class_of_labels(sample: Scene) -> dict[int, int]:
+    """Each label of a scan's ``sample`` (its :meth:`~xrayraster.io.scan_file.ScanFile.sample_scene`)
+    → its class: the matrix's, the yarns' (a label the matrix's voids take is air)."""
     out = {}
-    for o in scan.sample_scene().objects:
+    for o in sample.objects:
         if o.name == "matrix":
             out[o.label] = MATRIX
         elif not o.name.startswith("void"):
@@ -106,14 +107,15 @@ def class_of_labels(scan: ScanFile) -> dict[int, int]:
 
 
 def fit_weave(scan: ScanFile, real: np.ndarray, use: np.ndarray, peaks: dict[int, float], gl,
-              labels: np.ndarray | None = None) -> WeaveFit:
+              labels: np.ndarray | None = None, sample: Scene | None = None) -> WeaveFit:
     """The cell of ``scan``'s weave whose labels agree best with the classes of the ``real`` volume
     (cm⁻¹) over the voxels of ``use``: the user's region ``labels`` where given, else cut at ``peaks``
-    (class → μ, cm⁻¹; module docstring), on the GL context ``gl``."""
+    (class → μ, cm⁻¹; module docstring), on the GL context ``gl``. ``sample``: the scan's sample
+    scene where the caller has it meshed already."""
     started = time.perf_counter()
     cell = scan.weave.sample.cell
     keys = KEYS[:-1] if getattr(cell, "plies", None) else KEYS
-    class_of = class_of_labels(scan)
+    class_of = class_of_labels(sample if sample is not None else scan.sample_scene())
     lookup = np.zeros(max(max(class_of), int(labels.max()) if labels is not None else 0) + 1, np.uint8)
     for label, cls in class_of.items():
         lookup[label] = cls
