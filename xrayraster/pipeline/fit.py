@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import functools
 import math
 import time
 from contextlib import nullcontext
@@ -60,7 +61,7 @@ from ..scene.scene import Scene
 from ..simulate.renderer import Renderer
 from .fit_figures import Figures, class_peaks, measure, mixture_means, sides_seen
 from .fit_search import TOLERANCES, Knobs, Search, relative_errors
-from .fit_tracer import FIBRE, START_FRACTION, FoundTracer, find_tracers, with_tracers
+from .fit_tracer import FIBRE, START_FRACTION, find_tracers, with_tracers
 from .fit_weave import AIR, FITTED_EROSION, MATRIX, YARN, WeaveFit, class_of_labels, fit_weave
 
 
@@ -114,34 +115,11 @@ def fit(real, scan, *, labels=None, rounds: int = 3, weave: bool = True, gl=None
         mount = (voxelize(loaded.mount, loaded.volume, context=renderer.gl).data > 0 if loaded.mount is not None
                  else np.zeros(sample.labels.shape, bool))
         inside, axis_radius = _field_of_view(loaded)
-        inside &= ~mount
-        voxel_mm = float(min(loaded.volume.voxel_size))
-
-        # Without labels, in every volume alike: the sample's classes share one peak, a two-component
-        # mixture's (started at ``mixture``), and the sample is where μ is above half its lowest
-        # class's, scaled as that peak is (``lowest``: the first run's, with its exact labels).
-        classes: list = []
-        mixture: dict = {}
-        lowest: list = []
-        tracers: list[FoundTracer] = []
-        woven: WeaveFit | None = None
-
-        def figures(volume, labels_=None, real_=False):
-            """The volume's figures; without labels its body by μ, and its peaks under the fitted cell's
-            labels where the weave was fitted, else one mixture peak for every class."""
-            cores = {t.yarn: t.real if real_ else t.simulated for t in tracers}
-            if not mixture:
-                return measure(volume, labels_, inside, axis_radius, voxel_mm, cores)
-            peak = mixture_means(volume[inside], mixture)["sample"]
-            above = volume > lowest[0] / 2 * peak / mixture["sample"]
-            body = ndimage.binary_fill_holes(ndimage.binary_opening(above, iterations=1)).astype(np.uint8)
-            peaks = (class_peaks(volume, sample.labels, inside, FITTED_EROSION) if woven is not None
-                     else dict.fromkeys(classes, peak))
-            return dataclasses.replace(measure(volume, body, inside, axis_radius, voxel_mm, cores), peaks=peaks)
-
+        figures = _Measure(inside & ~mount, axis_radius, float(min(loaded.volume.voxel_size)))
         volumes = {"real": real}
 
-        def run(k: Knobs, noise: bool = True, keep: str | None = None) -> Figures:
+        def run(k: Knobs, sample: _Rendered, figures: _Measure, noise: bool = True,
+                keep: str | None = None) -> Figures:
             scanned = sample.scanned
             projections = renderer.project_lengths(
                 scanned.with_materials(k.materials(scanned.materials, sample.tracers)), sample.lengths,
@@ -157,28 +135,27 @@ def fit(real, scan, *, labels=None, rounds: int = 3, weave: bool = True, gl=None
                 volumes[keep] = volume.data
             return figures(volume.data, sample.labels)
 
-        start = run(knobs, keep="start")
+        start = run(knobs, sample, figures, keep="start")
         real_labels = None
         if labels is not None:
             real_labels = _given_labels(labels, loaded, start)
         else:
-            classes.extend(start.peaks)
-            lowest.append(min(start.peaks.values()))
-            mixture.update(air=0.0, sample=float(np.mean(list(start.peaks.values()))))
-            mixture["sample"] = mixture_means(volumes["start"][inside], mixture)["sample"]
+            figures = figures.lumped(volumes["start"], start.peaks)
             lumped = figures(volumes["start"])  # with the start's own exact labels' peaks where the cell is fitted
             start = dataclasses.replace(lumped, peaks=start.peaks) if weave and loaded.weave is not None else lumped
-        first = start
+        first, woven, tracers = start, None, []
         if weave and loaded.weave is not None:
-            woven, found, scene = _fit_weave(real, real_labels, inside, start, loaded, sample.scene, renderer.gl)
-            tracers.extend(found)
-            classes.clear()  # the peaks are now each class's, under the fitted cell's labels
+            woven, tracers, scene = _fit_weave(real, real_labels, figures.inside, start, loaded, sample.scene,
+                                               renderer.gl)
             sample = _Rendered.of(woven.scan, renderer, scene)
+            # The peaks are now each class's, under the fitted cell's labels.
+            figures = dataclasses.replace(figures, classes=(), cell_labels=sample.labels, tracers=tuple(tracers))
             knobs = dataclasses.replace(knobs, tracers=dict.fromkeys((t.yarn for t in tracers), START_FRACTION),
                                         matrix=sample.matrix)
-            first = run(knobs)
-        target = figures(real, real_labels, real_=True)
-        search = Search(knobs, first, target, run, sample.scanned.objects)
+            first = run(knobs, sample, figures)
+        target = figures(real, real_labels, real=True)
+        search = Search(knobs, first, target, functools.partial(run, sample=sample, figures=figures),
+                        sample.scanned.objects)
         if not sides_seen(first, target):
             search.kept.add("detector.blur_sigma_px")
             search.unidentified["detector.blur_sigma_px"] = (
@@ -186,7 +163,7 @@ def fit(real, scan, *, labels=None, rounds: int = 3, weave: bool = True, gl=None
                 "cone beam (Feldkamp's artefact) more than by a blur: the file's kept")
         if woven is not None:
             search.unidentified.update(woven.unidentified)
-        if classes:
+        if figures.classes:
             search.unidentified["materials.*.density"] = ("without region labels the classes' peaks overlap: one factor "
                                                           "is fitted for every material of the sample (--labels fits each)")
         for _ in range(rounds):
@@ -194,7 +171,7 @@ def fit(real, scan, *, labels=None, rounds: int = 3, weave: bool = True, gl=None
                 break
             search.round()
         best_knobs, best = search.best
-        run(best_knobs, keep="fitted")  # the same seed: the best run's volume again, for the report
+        run(best_knobs, sample, figures, keep="fitted")  # the same seed: the best run's volume again, for the report
     fitted_table = best_knobs.write(copy.deepcopy(table))
     parameters = initial.compare(best_knobs)
     if woven is not None:
@@ -237,6 +214,47 @@ def _weave_report(woven: WeaveFit | None, tracers: list, knobs: "Knobs") -> dict
     return {**woven.to_dict(), "tracers": [{"yarn": t.yarn, "bright_share": t.share,
                                             "fibre": FIBRE, "fibre_fraction": knobs.tracers[t.yarn]}
                                            for t in tracers]}
+
+
+@dataclass(frozen=True)
+class _Measure:
+    """How :func:`fit` takes a volume's figures (:func:`~xrayraster.pipeline.fit_figures.measure`) over
+    the field of view ``inside`` (each column's distance from the axis ``axis_radius``, voxels of
+    ``voxel_mm``), each of its ``tracers``' peak in its core (the real or the simulated one).
+
+    With the user's labels (no ``mixture``) the classes are those labels. Without them (:meth:`lumped`),
+    in every volume alike, the sample is where μ is above half its lowest class's peak (``lowest``,
+    the start's, scaled as the mixture's peak is), and its classes' peaks are each class's under
+    ``cell_labels`` (the fitted cell's, where the weave was fitted), else the one peak ``classes``
+    share: a two-component mixture's, started at ``mixture``."""
+
+    inside: np.ndarray
+    axis_radius: np.ndarray
+    voxel_mm: float
+    mixture: dict = dataclasses.field(default_factory=dict)
+    lowest: float = 0.0
+    classes: tuple = ()
+    cell_labels: np.ndarray | None = None
+    tracers: tuple = ()
+
+    def lumped(self, start: np.ndarray, peaks: dict) -> "_Measure":
+        """Without labels: the mixture started at the mean of the start volume's class ``peaks`` (its
+        exact labels') and fitted to ``start`` once."""
+        mixture = {"air": 0.0, "sample": float(np.mean(list(peaks.values())))}
+        mixture["sample"] = mixture_means(start[self.inside], mixture)["sample"]
+        return dataclasses.replace(self, mixture=mixture, lowest=min(peaks.values()), classes=tuple(peaks))
+
+    def __call__(self, volume: np.ndarray, labels: np.ndarray | None = None, real: bool = False) -> Figures:
+        cores = {t.yarn: t.real if real else t.simulated for t in self.tracers}
+        if not self.mixture:
+            return measure(volume, labels, self.inside, self.axis_radius, self.voxel_mm, cores)
+        peak = mixture_means(volume[self.inside], self.mixture)["sample"]
+        above = volume > self.lowest / 2 * peak / self.mixture["sample"]
+        body = ndimage.binary_fill_holes(ndimage.binary_opening(above, iterations=1)).astype(np.uint8)
+        peaks = (class_peaks(volume, self.cell_labels, self.inside, FITTED_EROSION) if self.cell_labels is not None
+                 else dict.fromkeys(self.classes, peak))
+        return dataclasses.replace(measure(volume, body, self.inside, self.axis_radius, self.voxel_mm, cores),
+                                   peaks=peaks)
 
 
 @dataclass(frozen=True)

@@ -18,6 +18,8 @@ from __future__ import annotations
 import logging
 import os
 import re
+import signal
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
@@ -133,12 +135,30 @@ def _probe_failure(info: DeviceInfo, device) -> str | None:
     if info.index not in _probe_failures:
         cl = _cl()
         try:
-            cl.Program(cl.Context([device]), _PROBE_SOURCE).build()
+            with signals_held():
+                cl.Program(cl.Context([device]), _PROBE_SOURCE).build()
             _probe_failures[info.index] = None
         except cl.Error as exc:
             log_lines = [line.strip() for line in str(exc).splitlines() if "error" in line.lower()]
             _probe_failures[info.index] = (log_lines[-1] if log_lines else str(exc).splitlines()[0])[:200]
     return _probe_failures[info.index]
+
+
+@contextmanager
+def signals_held():
+    """SIGINT and SIGTERM kept from this thread while an OpenCL compiler runs in it. PoCL compiles
+    in-process, and a signal that cuts into its compiler's system calls makes the compiler print its
+    own error to stderr (CI saw "1 error generated." before xrayraster's one line on a SIGTERM).
+    Held, the signal goes to another thread or waits for the block's end; either way Python runs its
+    handler once the compile has returned, as it would have."""
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
 class CLContext:
@@ -163,7 +183,9 @@ class CLContext:
         options = tuple(f"-D{k}={v}" for k, v in sorted((defines or {}).items()))
         if (source, options) not in self._programs:
             try:
-                self._programs[source, options] = cl.Program(self.ctx, read_shader(source)).build(options=list(options))
+                with signals_held():
+                    self._programs[source, options] = cl.Program(self.ctx, read_shader(source)).build(
+                        options=list(options))
             except cl.RuntimeError as exc:
                 raise OpenCLError(f"OpenCL kernel {source} failed to build on {self.info}: {exc}"
                                   + (f". {COMPILER_HINT}" if "unknown target CPU" in str(exc) else "")) from None
