@@ -16,6 +16,7 @@ import os
 import shutil
 import socket
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -267,10 +268,17 @@ def test_the_encoding_is_within_half_a_level():
     assert np.all(flat == 1.25)  # a constant frame (no range) decodes to itself
 
 
-def client(scene_file, **options) -> TestClient:
+@contextmanager
+def client(scene_file, **options):
+    """A test client of the app serving ``scene_file``; its preview closed after (its render thread
+    and renderer would otherwise outlive the test, to the interpreter's exit)."""
     preview = Preview(Document.open(scene_file), threads=1)
     app = make_app(preview, host="127.0.0.1", port=8000, **options)
-    return TestClient(app, base_url="http://127.0.0.1:8000")
+    try:
+        with TestClient(app, base_url="http://127.0.0.1:8000") as c:
+            yield c
+    finally:
+        preview.close()
 
 
 def test_the_server_answers_frames_and_errors_and_keeps_serving(scene_file, gl):

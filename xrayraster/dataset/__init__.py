@@ -1,6 +1,7 @@
 """Dataset builds (docs/dataset.md): dataset files and their deterministic draws of scan files
 (``dataset_file``, ``distributions``), the plan of a build (``plan``), the build on a process pool
-or Dask (``build``: ``xr.build``), and the builds' on-disk layouts (``layouts``, with ``manifest``,
+or Dask (``build``: ``xr.build``), and the builds' on-disk layouts (``layouts``: one module each,
+``tiff_layout``, ``nnunet_layout``, ``hdf5_layout``, and ``layout_shared``; with ``manifest``,
 ``nifti`` and the shared ``names``; docs/dataset_layouts.md).
 
 The layer between ``pipeline``, whose scans a build runs, and ``xr.ml``, which reads builds. The
