@@ -18,7 +18,8 @@ from ..core.geometry import SCAN_KEYS
 from ..core.volume import VolumeGeometry
 from ..weave.distort import Distortion
 from ..weave.voids import Voids
-from ..weave.spec import Section, UnitCell
+from ..weave.section import Section
+from ..weave.spec import UnitCell
 from .pose import POSE_KEYS
 from .scan_file import SCAN_TABLES, ScanOptions
 from .scene_file import (

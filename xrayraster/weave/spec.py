@@ -23,93 +23,11 @@ from ..core.choices import check_choice
 from ..core.errors import ConfigError, WeaveError
 from ..core.validate import show
 from .families import FAMILIES, FAMILY_FIELDS, FAMILY_NAMES, PLIES, WARP_POSITIONS, WEFT_LAYERS, Family
+from .checks import checked_float, checked_int, set_field
 from .patterns import checked_pattern
+from .section import Section
 
-__all__ = ["SECTION_SHAPES", "Section", "UnitCell"]
-
-SECTION_SHAPES = ("ellipse", "lenticular", "power_ellipse", "rounded_rectangle")
-_SHAPE_PARAMETER = {"power_ellipse": "exponent", "rounded_rectangle": "corner"}
-
-
-def _set(obj, name: str, value) -> None:
-    object.__setattr__(obj, name, value)
-
-
-def _number(name: str, value, *, lo: float | None = None, hi: float | None = None,
-            lo_open: bool = True, hi_open: bool = False, fix: str = "") -> float:
-    """A finite float within bounds, else a WeaveError naming ``name`` and ``fix``."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Real) or value != value or abs(value) == float("inf"):
-        raise WeaveError(f"{name} must be a finite number, got {show(value)}")
-    x = float(value)
-    if lo is not None and (x < lo or (lo_open and x == lo)):
-        raise WeaveError(f"{name} must be {'>' if lo_open else '>='} {show(float(lo))}, got {show(x)}{fix}")
-    if hi is not None and (x > hi or (hi_open and x == hi)):
-        raise WeaveError(f"{name} must be {'<' if hi_open else '<='} {show(float(hi))}, got {show(x)}{fix}")
-    return x
-
-
-def _int(name: str, value, lo: int, fix: str = "") -> int:
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < lo:
-        raise WeaveError(f"{name} must be an integer >= {lo}, got {show(value)}{fix}")
-    return int(value)
-
-
-@dataclass(frozen=True)
-class Section:
-    """A yarn cross-section: its shape and the one number some shapes take.
-
-    ``ellipse`` and ``lenticular`` (two circular arcs meeting at the yarn's edges) take none.
-    ``power_ellipse`` takes ``exponent`` n > 0, the superellipse ``|x/a|^n + |z/b|^n = 1`` with
-    a, b half the width and height (n = 2 the ellipse, n > 2 squarer; not TexGen's power ellipse),
-    as :func:`xrayraster.weave.sweep.power_ellipse` draws it. ``rounded_rectangle`` takes
-    ``corner`` in (0, 1]: the corner radius as a fraction of half the smaller side (1 a stadium),
-    as :func:`xrayraster.weave.sweep.rounded_rectangle` draws it.
-    """
-
-    shape: str = "ellipse"
-    exponent: float | None = None
-    corner: float | None = None
-
-    def check(self, field: str) -> None:
-        """Validate, naming ``field`` (e.g. ``weft_section``) in the message."""
-        check_choice(self.shape, SECTION_SHAPES, f"{field}.shape", WeaveError)
-        wanted = _SHAPE_PARAMETER.get(self.shape)
-        for name in ("exponent", "corner"):
-            if name != wanted and getattr(self, name) is not None:
-                takes = f"takes only '{wanted}'" if wanted else "takes no parameter"
-                raise WeaveError(f"{field}.{name}: shape {self.shape!r} {takes}; remove {name}")
-        if self.shape == "power_ellipse":
-            if self.exponent is None:
-                raise WeaveError(f"{field}.exponent: a power_ellipse needs its exponent n > 0 "
-                                 "(|x/a|^n + |z/b|^n = 1; 2 is the ellipse, > 2 squarer)")
-            _set(self, "exponent", _number(f"{field}.exponent", self.exponent, lo=0.0,
-                                           fix=" (|x/a|^n + |z/b|^n = 1; 2 is the ellipse, > 2 squarer)"))
-        if self.shape == "rounded_rectangle":
-            if self.corner is None:
-                raise WeaveError(f"{field}.corner: a rounded_rectangle needs its corner radius fraction in (0, 1]")
-            _set(self, "corner", _number(f"{field}.corner", self.corner, lo=0.0, hi=1.0,
-                                         fix=" (the corner radius over half the smaller side; 1 a stadium)"))
-
-    def to_dict(self) -> dict:
-        out = {"shape": self.shape}
-        for name in ("exponent", "corner"):
-            if getattr(self, name) is not None:
-                out[name] = getattr(self, name)
-        return out
-
-    @classmethod
-    def from_dict(cls, d, field: str, where: str) -> "Section":
-        if isinstance(d, str):  # a bare shape name
-            d = {"shape": d}
-        if not isinstance(d, dict):
-            raise ConfigError(f"{where}: {field} must be a table like {{ shape = \"ellipse\" }}, got {show(d)}")
-        fields.only(d, {"shape", "exponent", "corner"}, f"{where} {field}")
-        kwargs = {"shape": fields.string(fields.required(d, "shape", f"{where} {field}"), f"{field}.shape", where)}
-        for name in ("exponent", "corner"):
-            if name in d:
-                kwargs[name] = fields.number(d[name], f"{field}.{name}", where)
-        return cls(**kwargs)
-
+__all__ = ["UnitCell"]
 
 @dataclass(frozen=True)
 class UnitCell:
@@ -177,18 +95,18 @@ class UnitCell:
         else:
             self._lay_stack(family)
         for name in ("warp_spacing", "weft_spacing", "thickness"):
-            _set(self, name, _number(name, getattr(self, name), lo=0.0, fix=" mm"))
+            set_field(self, name, checked_float(name, getattr(self, name), lo=0.0, fix=" mm"))
         for name in ("warp_width_fraction", "weft_width_fraction"):
-            _set(self, name, _number(name, getattr(self, name), lo=0.0, hi=1.0,
+            set_field(self, name, checked_float(name, getattr(self, name), lo=0.0, hi=1.0,
                                      fix=" (a yarn wider than its spacing overlaps its neighbour; "
                                          "lower the fraction or widen the spacing)"))
         share = family.default_weft_share if self.weft_share is None else self.weft_share
-        _set(self, "weft_share", _number("weft_share", share, lo=0.0, hi=1.0, hi_open=True,
+        set_field(self, "weft_share", checked_float("weft_share", share, lo=0.0, hi=1.0, hi_open=True,
                                          fix=" (the weft's share of the yarn stack thickness)"))
         if self.margin_z is None:
-            _set(self, "margin_z", family.default_margin_z(self.thickness, self.weft_share, self.weft_layers))
+            set_field(self, "margin_z", family.default_margin_z(self.thickness, self.weft_share, self.weft_layers))
         for name in ("margin_xy", "margin_z"):
-            _set(self, name, _number(name, getattr(self, name), lo=0.0, lo_open=False, fix=" mm"))
+            set_field(self, name, checked_float(name, getattr(self, name), lo=0.0, lo_open=False, fix=" mm"))
         for name in ("weft_section", "warp_section"):
             section = getattr(self, name)
             if isinstance(section, str):
@@ -196,7 +114,7 @@ class UnitCell:
             if not isinstance(section, Section):
                 raise WeaveError(f"{name} must be a Section (or a shape name), got {show(section)}")
             section.check(name)
-            _set(self, name, section)
+            set_field(self, name, section)
         if self.thickness <= 2 * self.margin_z:
             raise WeaveError(f"thickness ({show(self.thickness)} mm) must exceed 2 · margin_z "
                              f"({show(2 * self.margin_z)} mm): no room is left for the yarns; "
@@ -212,69 +130,69 @@ class UnitCell:
             if isinstance(floats, (str, bytes)) or not hasattr(floats, "__len__") or len(floats) != 2:
                 raise WeaveError(f"floats must be [over, under], the wefts a twill's warp runs over then under, "
                                  f"got {show(floats)}")
-            _set(self, "floats", (_int("floats[0] (over)", floats[0], 1), _int("floats[1] (under)", floats[1], 1)))
+            set_field(self, "floats", (checked_int("floats[0] (over)", floats[0], 1), checked_int("floats[1] (under)", floats[1], 1)))
         if self.harness is not None:
-            _set(self, "harness", _int("harness", self.harness, 5, " (a satin needs at least 5 wefts in its repeat)"))
+            set_field(self, "harness", checked_int("harness", self.harness, 5, " (a satin needs at least 5 wefts in its repeat)"))
         given = [name for name in ("floats", "harness") if getattr(self, name) is not None]
         if self.pattern is not None and given:
             raise WeaveError(f"give pattern or {given[0]}, not both: a pattern sets every crossing itself")
         pattern = family.pattern(None if self.pattern is None else checked_pattern(self.pattern), self.floats,
                                  self.harness)
-        _set(self, "pattern", pattern)
+        set_field(self, "pattern", pattern)
         for name, count, what in (("warp_positions", len(pattern), "rows"), ("weft_per_layer", len(pattern[0]),
                                                                             "columns")):
             if getattr(self, name) is not None and getattr(self, name) != count:
                 raise WeaveError(f"{name} ({show(getattr(self, name))}) must equal the pattern's {what} ({count}): "
                                  f"a {self.family} cell has a warp per row and a weft per column; leave {name} out")
-            _set(self, name, count)
-        plies = _int("plies", PLIES if self.plies is None else self.plies, 1, " (plies stacked in the cell)")
-        _set(self, "plies", plies)
+            set_field(self, name, count)
+        plies = checked_int("plies", PLIES if self.plies is None else self.plies, 1, " (plies stacked in the cell)")
+        set_field(self, "plies", plies)
         shift = (0.0, 0.0) if self.ply_shift_mm is None else self.ply_shift_mm
         if isinstance(shift, (str, bytes)) or not hasattr(shift, "__len__") or len(shift) != 2:
             raise WeaveError(f"ply_shift_mm must be [x, y], each ply's shift from the one below (mm), got {show(shift)}")
-        _set(self, "ply_shift_mm", (_number("ply_shift_mm[0]", shift[0]), _number("ply_shift_mm[1]", shift[1])))
+        set_field(self, "ply_shift_mm", (checked_float("ply_shift_mm[0]", shift[0]), checked_float("ply_shift_mm[1]", shift[1])))
         for name, value in (("weft_layers", plies), ("stuffers", 0), ("warp_ratio", 1), ("binder_ratio", 1)):
-            _set(self, name, value)
-        _set(self, "binder_position", ())
-        _set(self, "binder_path", ())
+            set_field(self, name, value)
+        set_field(self, "binder_position", ())
+        set_field(self, "binder_path", ())
 
     def _lay_stack(self, family: Family) -> None:
         """A 3D family's weft layers, columns and warp positions, with its own defaults."""
-        n = _int("weft_layers", WEFT_LAYERS if self.weft_layers is None else self.weft_layers, 2,
+        n = checked_int("weft_layers", WEFT_LAYERS if self.weft_layers is None else self.weft_layers, 2,
                  " (a 3D weave holds at least two weft layers)")
-        _set(self, "weft_layers", n)
+        set_field(self, "weft_layers", n)
         step = offset = None
         if "binder_step" in family.takes:
-            step = _int("binder_step", 1 if self.binder_step is None else self.binder_step, 1,
+            step = checked_int("binder_step", 1 if self.binder_step is None else self.binder_step, 1,
                         " (weft columns a binder takes to climb one gap)")
-            _set(self, "binder_step", step)
+            set_field(self, "binder_step", step)
         if "binder_offset" in family.takes:
-            offset = _int("binder_offset", 1 if self.binder_offset is None else self.binder_offset, 0,
+            offset = checked_int("binder_offset", 1 if self.binder_offset is None else self.binder_offset, 0,
                           " (weft columns between the paths of neighbouring binder positions)")
-            _set(self, "binder_offset", offset)
+            set_field(self, "binder_offset", offset)
         w = self.weft_per_layer
         w = family.default_weft_per_layer(n, step or 1) if w is None else w
-        w = _int("weft_per_layer", w, 1, " (weft yarns per layer in the cell)")
-        _set(self, "weft_per_layer", w)
+        w = checked_int("weft_per_layer", w, 1, " (weft yarns per layer in the cell)")
+        set_field(self, "weft_per_layer", w)
         period = family.period(n, step or 1)
         if period and w % period:
             raise WeaveError(f"weft_per_layer ({w}) must be a multiple of the binders' period, 2 · weft_layers · "
                              f"binder_step = {period} columns, so the cell repeats; use {period} or "
                              f"{2 * period}")
-        p = _int("warp_positions", WARP_POSITIONS if self.warp_positions is None else self.warp_positions, 1,
+        p = checked_int("warp_positions", WARP_POSITIONS if self.warp_positions is None else self.warp_positions, 1,
                  " (warp positions across the cell)")
-        _set(self, "warp_positions", p)
-        _set(self, "warp_ratio", _int("warp_ratio", 1 if self.warp_ratio is None else self.warp_ratio, 1,
+        set_field(self, "warp_positions", p)
+        set_field(self, "warp_ratio", checked_int("warp_ratio", 1 if self.warp_ratio is None else self.warp_ratio, 1,
                                       " (stuffer columns after each group of binder positions)"))
-        br = _int("binder_ratio", 1 if self.binder_ratio is None else self.binder_ratio, 1,
+        br = checked_int("binder_ratio", 1 if self.binder_ratio is None else self.binder_ratio, 1,
                   " (binder positions in each group)")
-        _set(self, "binder_ratio", br)
+        set_field(self, "binder_ratio", br)
         if p % br:
             raise WeaveError(f"warp_positions ({p}) must be a multiple of binder_ratio ({br}): the warp columns "
                              "repeat in groups of binder_ratio binder positions")
         stuffers = family.default_stuffers(n) if self.stuffers is None else self.stuffers
-        stuffers = _int("stuffers", stuffers, 0)
-        _set(self, "stuffers", stuffers)
+        stuffers = checked_int("stuffers", stuffers, 0)
+        set_field(self, "stuffers", stuffers)
         if stuffers > n - 1:
             raise WeaveError(f"stuffers must be <= weft_layers - 1 = {n - 1} (one per gap between weft layers), "
                              f"got {stuffers}")
@@ -284,10 +202,10 @@ class UnitCell:
         n, w, p = self.weft_layers, self.weft_per_layer, self.warp_positions
         step, offset = self.binder_step, self.binder_offset
         b = self.binders
-        b = family.binder_count(p, n) if b is None else _int("binders", b, 1, " (binder warp yarns per cell)")
-        _set(self, "binders", b)
-        _set(self, "binder_position", self._positions(b, p))
-        _set(self, "binder_path", self._paths(b, n, w, p, step or 1, offset or 0))
+        b = family.binder_count(p, n) if b is None else checked_int("binders", b, 1, " (binder warp yarns per cell)")
+        set_field(self, "binders", b)
+        set_field(self, "binder_position", self._positions(b, p))
+        set_field(self, "binder_path", self._paths(b, n, w, p, step or 1, offset or 0))
         self._check_room(n)
 
     def _positions(self, b: int, p: int) -> tuple[int, ...]:
@@ -298,7 +216,7 @@ class UnitCell:
             raise WeaveError(f"binder_position must list one warp position per binder ({b}), got {show(pos)}")
         out = []
         for i, x in enumerate(pos):
-            x = _int(f"binder_position[{i}]", x, 0)
+            x = checked_int(f"binder_position[{i}]", x, 0)
             if x >= p:
                 raise WeaveError(f"binder_position[{i}] must be in 0..{p - 1} (warp_positions - 1), got {x}; "
                                  "raise warp_positions or move the binder")
@@ -321,7 +239,7 @@ class UnitCell:
                                  f"got {show(path)}")
             gaps = []
             for j, g in enumerate(path):
-                g = _int(f"binder_path[{i}][{j}]", g, 0, f" (gaps run 0..{n} = weft_layers)")
+                g = checked_int(f"binder_path[{i}][{j}]", g, 0, f" (gaps run 0..{n} = weft_layers)")
                 if g > n:
                     raise WeaveError(f"binder_path[{i}][{j}] = {g} leaves the weft stack: gaps run 0 (below weft "
                                      f"layer 0) to {n} (above the top layer, weft_layers = {n})")

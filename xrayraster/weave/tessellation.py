@@ -44,7 +44,8 @@ from ..core.validate import show
 from .binders import binder_curvature_along, smallest_bend_radius_mm
 from .sample import Sample, section_outline
 from .sections import corner_radius, lens_arc
-from .spec import Section, UnitCell
+from .section import Section
+from .spec import UnitCell
 from .sweep import bend_sagitta_mm
 
 __all__ = [

@@ -11,7 +11,8 @@ from ..core import fields
 from ..core.errors import ConfigError, WeaveError
 from ..core.validate import show
 from .distort import Distortion
-from .spec import Section, UnitCell
+from .section import Section
+from .spec import UnitCell
 
 __all__ = ["TEXTOMOS_KEYS", "TextomosImport", "read_textomos"]
 

@@ -8,7 +8,7 @@ import numpy as np
 import trimesh
 
 from ..core.errors import WeaveError
-from .spec import Section
+from .section import Section
 from .sweep import ellipse, lenticular, power_ellipse, rounded_rectangle, yarn_mesh
 
 __all__ = ["LABELS", "PRIORITIES", "Yarn", "section_outline"]
