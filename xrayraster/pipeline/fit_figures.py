@@ -89,7 +89,7 @@ def measure(volume: np.ndarray, labels: np.ndarray, inside: np.ndarray, axis_rad
     width, (distance, profile) = _edge(volume, near, signed)
     return Figures(peaks, noise, _nps(volume, air), width * voxel_mm, _ring_rms(volume, air, axis_radius),
                    (tuple((distance * voxel_mm).tolist()), tuple(profile.tolist())), _side_share(near, signed),
-                   {yarn: float(np.median(volume[core])) for yarn, core in (tracers or {}).items() if core.any()})
+                   {yarn: float(np.median(volume[voxels])) for yarn, voxels in (tracers or {}).items() if voxels.any()})
 
 
 def class_peaks(volume: np.ndarray, labels: np.ndarray, inside: np.ndarray,
@@ -98,12 +98,17 @@ def class_peaks(volume: np.ndarray, labels: np.ndarray, inside: np.ndarray,
     regions eroded by ``erosion`` voxels."""
     peaks = {}
     for label in (int(v) for v in np.unique(labels) if v != 0):
-        region = (labels == label) & inside
-        core = ndimage.binary_erosion(region, iterations=erosion)
-        core = core if core.sum() >= MIN_VOXELS else region  # a region too thin to erode: all of it
-        if core.sum() >= MIN_VOXELS:
-            peaks[label] = float(np.median(volume[core]))
+        inner = core((labels == label) & inside, erosion)
+        if inner.sum() >= MIN_VOXELS:
+            peaks[label] = float(np.median(volume[inner]))
     return peaks
+
+
+def core(region: np.ndarray, erosion: int = PEAK_EROSION) -> np.ndarray:
+    """``region`` (bool) eroded by ``erosion`` voxels, clear of the partial volume at its border; all of
+    it where fewer than :data:`MIN_VOXELS` would remain (a region too thin to erode)."""
+    inner = ndimage.binary_erosion(region, iterations=erosion)
+    return inner if inner.sum() >= MIN_VOXELS else region
 
 
 def _nps(volume: np.ndarray, air: np.ndarray) -> tuple[float, ...]:

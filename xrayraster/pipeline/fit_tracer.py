@@ -24,8 +24,7 @@ from ..gl.voxelize import voxelize
 from ..io.scan_file import ScanFile
 from ..scene.scene import Scene
 from ..weave.materials import FibreBundle, Tracer
-from .fit_figures import MIN_VOXELS as MIN_PEAK_VOXELS
-from .fit_figures import PEAK_EROSION
+from .fit_figures import core
 from .fit_weave import MATRIX, YARN
 
 #: How far above the yarns' peak a tracer's voxels lie, in steps from the matrix's peak to the yarns'.
@@ -77,7 +76,7 @@ def find_tracers(smoothed: np.ndarray, means: dict[int, float], use: np.ndarray,
         share = hits[i + 1] / max(total[i + 1], 1)
         if o.name != "matrix" and not o.name.startswith("void") and share >= MIN_SHARE:
             touched = np.isin(bodies, np.unique(bodies[bright & (owner == i + 1)])) & bright  # its bodies whole
-            found.append(FoundTracer(o.name, float(share), _core(touched), _core((owner == i + 1) & use)))
+            found.append(FoundTracer(o.name, float(share), core(touched), core((owner == i + 1) & use)))
     return found
 
 
@@ -92,8 +91,3 @@ def tracer_entry(yarn: str, fraction: float) -> dict:
     """A ``[weave.materials] tracers`` entry of a scan file for ``yarn`` at fibre ``fraction``."""
     return {"yarn": yarn, "material": {"fibre": FIBRE, "fibre_fraction": round(float(fraction), 4)}}
 
-
-def _core(region: np.ndarray) -> np.ndarray:
-    """``region`` a voxel in from its border, as the peaks are taken (its whole where too thin)."""
-    core = ndimage.binary_erosion(region, iterations=PEAK_EROSION)
-    return core if core.sum() >= MIN_PEAK_VOXELS else region

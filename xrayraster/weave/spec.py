@@ -404,7 +404,7 @@ class UnitCell:
             kwargs["family"] = fields.string(d["family"], "family", where)
             check_choice(kwargs["family"], FAMILY_NAMES, f"{where} family", ConfigError)
         for key in ("weft_per_layer", "weft_layers", "warp_positions", "binders", "warp_ratio", "binder_ratio",
-                    "binder_step"):
+                    "binder_step", "harness", "plies"):
             if key in d:
                 kwargs[key] = fields.integer(d[key], key, where, 1)
         for key in ("stuffers", "binder_offset"):
@@ -426,9 +426,6 @@ class UnitCell:
         for key in ("weft_section", "warp_section"):
             if key in d:
                 kwargs[key] = Section.from_dict(d[key], key, where)
-        for key in ("harness", "plies"):
-            if key in d:
-                kwargs[key] = fields.integer(d[key], key, where, 1)
         if "floats" in d:
             kwargs["floats"] = fields.vector(d["floats"], "floats", where, 2, "[over, under], two counts of wefts",
                                              element=fields.integer, lo=1)
@@ -438,7 +435,6 @@ class UnitCell:
             kwargs["pattern"] = _rows(d["pattern"], "pattern", where, "a list of rows of 0s and 1s (1: the warp over "
                                       "the weft), a row per warp yarn", "a row of 0s and 1s, one a weft yarn")
         return kwargs
-
 
 
 def _rows(rows, field: str, where: str, form: str, row_form: str) -> tuple[tuple[int, ...], ...]:
