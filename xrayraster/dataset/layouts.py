@@ -16,9 +16,9 @@ or an earlier build's (docs/outputs.md); these writers then replace only their o
 
 A sample's *record* is what the runner passes (``split``, ``seed``, the drawn ``values`` by dotted
 key and anything else JSON-ready, nothing that varies between runs) completed by
-:func:`stored_record` (``index``, the label ``fractions``, and the ``extra_labels`` the scan made);
-:meth:`~DatasetLayout.finished` gives it back for every complete sample, so the runner can rebuild
-the manifest from the disk alone.
+:func:`~xrayraster.dataset.layout_shared.stored_record` (``index``, the label ``fractions``, and the
+``extra_labels`` the scan made); :meth:`~DatasetLayout.finished` gives it back for every complete
+sample, so the runner can rebuild the manifest from the disk alone.
 
 A scan's extra labels (``[scan] labels``: instances, directions, centre lines; docs/labels.md) are
 stored beside its volume and classes, in every layout, by the same atomic writes: the instance ids
@@ -36,7 +36,7 @@ from typing import TYPE_CHECKING, Callable, Protocol
 import numpy as np
 
 from .hdf5_layout import HDF5_CHUNK, Hdf5Layout
-from .layout_shared import NAME_RULE, ScanOutput, check_name, label_names, sample_id, stored_record
+from .layout_shared import NAME_RULE, ScanOutput, check_name
 from .names import GENERATOR
 from .nnunet_layout import NnunetLayout
 from .tiff_layout import TiffLayout
@@ -44,8 +44,8 @@ from .tiff_layout import TiffLayout
 if TYPE_CHECKING:
     from ..core.projections import Projections
 
-__all__ = ["GENERATOR", "HDF5_CHUNK", "LAYOUTS", "NAME_RULE", "DatasetLayout", "Hdf5Layout", "NnunetLayout", "ScanOutput",
-           "TiffLayout", "check_name", "label_names", "sample_id", "stored_record"]
+# What readers of builds and the dataset file import from here (the rest of a layout is its module's).
+__all__ = ["GENERATOR", "HDF5_CHUNK", "LAYOUTS", "NAME_RULE", "DatasetLayout", "ScanOutput", "check_name"]
 
 
 class DatasetLayout(Protocol):
@@ -56,7 +56,7 @@ class DatasetLayout(Protocol):
                      projections: Projections | None = None,
                      write_meshes: Callable[[Path], None] | None = None) -> dict:
         """Write sample ``index`` atomically: its volume, labels, extra labels (those ``result``
-        holds) and :func:`stored_record`, and, when given, its ``projections`` and the meshes
+        holds) and :func:`~xrayraster.dataset.layout_shared.stored_record`, and, when given, its ``projections`` and the meshes
         ``write_meshes(directory)`` writes. Returns the stored record."""
 
     def finished(self, root: Path, name: str) -> dict[int, dict]:
