@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from xrayraster.pipeline.fit_figures import measure, mixture_means, sides_seen
+from xrayraster.pipeline.fit_figures import FACE_MARGIN_MM, class_peaks, measure, mixture_means, sides_seen
 
 SHAPE = (24, 64, 64)
 
@@ -40,6 +40,29 @@ def test_a_slab_through_the_grid_shows_no_side():
     box, plate = (measure(0.5 * sample.astype(np.float64), sample, inside, radius, 0.1) for sample in (labels, slab))
     assert sides_seen(box)
     assert not sides_seen(plate) and not sides_seen(box, plate)
+
+
+def test_the_peaks_keep_away_from_the_faces_along_the_axis():
+    """A slab of μ 0.5 whose faces along the axis are darkened (0.3) over 5 of its 14 voxels on each
+    side, as a cone beam's smear does: the class's peak is 0.5 away from the faces, 0.3 (most of its
+    voxels) without keeping away; in a plate thinner than the margin, the whole region's median; a
+    sample through the grid's top and bottom has no face there."""
+    labels, inside, radius = frame()
+    margin = int(np.ceil(FACE_MARGIN_MM / 0.1))
+    slab = np.zeros(SHAPE, np.uint8)
+    slab[4:18, 8:56, 8:56] = 1
+    volume = 0.5 * slab
+    volume[4:9], volume[13:18] = 0.3 * slab[4:9], 0.3 * slab[13:18]
+    assert margin == 5  # the slab's middle keeps voxels beyond the margin; the darkened faces lie within it
+    assert measure(volume, slab, inside, radius, voxel_mm=0.1).peaks == {1: pytest.approx(0.5)}
+    assert class_peaks(volume, slab, inside) == {1: pytest.approx(0.3)}
+    plate = np.zeros(SHAPE, np.uint8)
+    plate[10:13, 8:56, 8:56] = 1
+    assert class_peaks(0.4 * plate, plate, inside, voxel_mm=0.1) == {1: pytest.approx(0.4)}
+    through = np.ones(SHAPE, np.uint8)
+    shaded = 0.5 + 0.1 * (np.arange(SHAPE[0]) >= 12)[:, None, None] * through  # 12 of 24 slices at 0.6
+    shaded[:2] = 0.6  # the grid's ends: no face, so these count
+    assert class_peaks(shaded, through, inside, voxel_mm=0.1) == {1: pytest.approx(0.6)}
 
 
 def test_the_noise_and_its_spectrum_are_white_noises():
