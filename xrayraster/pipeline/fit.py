@@ -251,8 +251,8 @@ class _Measure:
         peak = mixture_means(volume[self.inside], self.mixture)["sample"]
         above = volume > self.lowest / 2 * peak / self.mixture["sample"]
         body = ndimage.binary_fill_holes(ndimage.binary_opening(above, iterations=1)).astype(np.uint8)
-        peaks = (class_peaks(volume, self.cell_labels, self.inside, FITTED_EROSION, self.voxel_mm) if self.cell_labels is not None
-                 else dict.fromkeys(self.classes, peak))
+        peaks = (class_peaks(volume, self.cell_labels, self.inside, FITTED_EROSION, self.voxel_mm)
+                 if self.cell_labels is not None else dict.fromkeys(self.classes, peak))
         return dataclasses.replace(measure(volume, body, self.inside, self.axis_radius, self.voxel_mm, cores),
                                    peaks=peaks)
 
