@@ -105,12 +105,12 @@ def class_peaks(volume: np.ndarray, labels: np.ndarray, inside: np.ndarray, eros
     """Each label's ``peaks`` figure (module docstring) in ``volume``, over the voxels ``inside``, its
     regions eroded by ``erosion`` voxels; with ``voxel_mm``, away from the sample's faces along the axis
     (:func:`away_from_faces`) where enough of a region is."""
-    away = away_from_faces(labels > 0, voxel_mm) if voxel_mm else None
+    away = away_from_faces(labels > 0, voxel_mm) if voxel_mm else True
     peaks = {}
     for label in (int(v) for v in np.unique(labels) if v != 0):
         region = (labels == label) & inside
-        inner = core(region & away, erosion) if away is not None else None
-        if inner is None or inner.sum() < MIN_VOXELS:
+        inner = core(region & away, erosion)
+        if inner.sum() < MIN_VOXELS:  # too little of it away from the faces: all of it
             inner = core(region, erosion)
         if inner.sum() >= MIN_VOXELS:
             peaks[label] = float(np.median(volume[inner]))
