@@ -5,7 +5,7 @@ refusal after the file's path.
 Memory: the parts that grow with the file's keys (:class:`~xrayraster.core.estimate.Part`): the
 views' geometry, the sample's meshes (a weave's triangles estimated from every key that multiplies
 them: its yarns a cell, spacings, cells and mesh knobs, :mod:`~xrayraster.weave.size`), one batch of
-projections and of filtered views, the volume and the labels. A preview's frame
+projections, the filtered views the FDK gathers for a pass over the volume, the volume and the labels. A preview's frame
 (:class:`FrameJob`) is the same sample and one view. Time: the sample's meshing, the
 projections (:mod:`~xrayraster.simulate.estimate`), the FDK's backprojection (per voxel and view)
 and the labels (per voxel). The FDK's and the labels' rates come from the full twin on the
@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from ..core.estimate import Estimate, Part
 from ..core.geometry import BYTES_PER_VIEW
 from ..io.scan_file import ScanFile
+from ..recon.fdk_plan import MAX_BATCH_VIEWS
 from ..simulate.estimate import seconds_per_view
 from ..weave.size import SECONDS_PER_TRIANGLE as MESH_SECONDS_PER_TRIANGLE
 from ..weave.size import estimated_triangles, mesh_part
@@ -30,9 +31,22 @@ SECONDS_PER_VOXEL_LABEL = 1.4e-8  # labels: 1.4 s / 512³ (1.9 s in bench_voxeli
 #: upload. The twin's 1,260 MiB peak less its volume, labels, one batch and the 347 MiB of a tiny
 #: scan (the libraries, GL and OpenCL) leaves ~240 MiB for its 700 k triangles: ~360 B, rounded up.
 BYTES_PER_SCENE_TRIANGLE = 400
-#: A detector pixel of a view in flight: the line integrals, the radiograph's float64 temporaries
-#: and the filtered copy (twice as wide, zero-padded for the ramp filter).
-BYTES_PER_BATCH_PIXEL = 4 + 3 * 8 + 2 * 4
+#: A detector pixel of a view in flight: the line integrals and the radiograph's float64 temporaries.
+BYTES_PER_BATCH_PIXEL = 4 + 3 * 8
+#: A detector pixel of a filtered view waiting for the backprojection: float32, up to twice as wide
+#: (a displaced detector's virtual columns).
+BYTES_PER_FILTERED_PIXEL = 2 * 4
+#: The filtered views a scan's FDK gathers before each pass over the volume (``FDKStream``'s
+#: ``batch_views``): 128 MiB of views (at least a batch of rendered ones; at most the FDK's 256).
+#: Each pass reads and writes the whole volume: the twin's 512³ in passes of ~128 views instead of
+#: 32 took its FDK from 28.2-29.2 to 25.8-26.6 s (BENCHMARKS.md).
+FDK_BATCH_BYTES = 2**27
+
+
+def fdk_batch_views(detector_shape: tuple[int, int], batch_views: int) -> int:
+    """Views per backprojection pass of a scan rendering ``batch_views`` at a time (:data:`FDK_BATCH_BYTES`)."""
+    rows, cols = detector_shape
+    return min(MAX_BATCH_VIEWS, max(batch_views, FDK_BATCH_BYTES // (rows * cols * 4)))
 
 
 @dataclass(frozen=True)
@@ -52,10 +66,13 @@ class ScanJob:
         shape = f"[volume] shape = {list(volume.shape)}"
         grid_fix = "use a coarser grid (shape, voxel_size) or a part of it (offset)"
         sample, triangles, meshing = _sample_plan(loaded)
+        filtered = min(views, fdk_batch_views((rows, cols), batch_views))
         parts = (
             Part("views' geometry", views * BYTES_PER_VIEW, f"[geometry] num_views = {views}", "use fewer views"),
             *sample,
             Part(f"a batch of {batch_views} views", min(views, batch_views) * rows * cols * BYTES_PER_BATCH_PIXEL,
+                 f"[geometry] detector_shape = {[rows, cols]}", "use fewer detector pixels"),
+            Part(f"{filtered} filtered views", filtered * rows * cols * BYTES_PER_FILTERED_PIXEL,
                  f"[geometry] detector_shape = {[rows, cols]}", "use fewer detector pixels"),
             Part("float32 volume", voxels * 4, shape, grid_fix),
             Part("labels", voxels, shape, grid_fix),

@@ -42,7 +42,7 @@ from ..weave.centrelines import centreline_table
 from ..weave.directions import direction_field
 from ..weave.yarn import LABELS as WEAVE_LABELS
 from ..weave.yarn import Yarn
-from .plan import ScanJob
+from .plan import ScanJob, fdk_batch_views
 
 __all__ = ["ScanResult", "check_scan_output", "scan"]
 
@@ -52,8 +52,8 @@ PROJECTIONS_NAME = "projections.tif"
 #: Spacing of the points of the centre lines a scan writes, in voxels of its grid.
 CENTRELINE_STEP_VOXELS = 0.5
 _LIBRARIES = ("numpy", "moderngl", "pyopencl", "manifold3d", "xraylib", "spekpy")
-# Views rendered, then filtered and backprojected, per batch: 32 MiB of line integrals at 512²,
-# and (measured) as fast in the backprojection as the FDK's largest batches. docs/scan.md
+# Views rendered, checked for starved pixels and filtered per batch (32 MiB of line integrals at
+# 512²); the FDK backprojects them in larger passes (plan.fdk_batch_views). docs/scan.md
 BATCH_VIEWS = 32
 STAGES = ("sample", "projections", "fdk", "labels")
 # What the FDK chose, from its provenance: weights, and whether truncated rows were extrapolated.
@@ -162,7 +162,8 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False, a
             # Nothing outside the sample and its mount attenuates: the displaced-detector weights
             # weigh that reach (recon/fdk_weights.py), not the grid's.
             stream = FDKStream(loaded.geometry, loaded.volume, filter=options.filter, truncation=options.truncation,
-                               truncation_width=options.truncation_width, context=cl, batch_views=BATCH_VIEWS,
+                               truncation_width=options.truncation_width, context=cl,
+                               batch_views=fdk_batch_views(loaded.geometry.detector_shape, BATCH_VIEWS),
                                threads=threads, object_radius_mm=footprint_radius(*scanned.bounds))
         with stream:
             provenances, stacks = _project_into(stream, renderer, scanned, loaded, seconds, progress,
@@ -193,7 +194,8 @@ def scan(scan_file_or_path, *, progress=False, keep_projections: bool = False, a
         **({"instances": yarns} if yarns is not None else {}),
         "mesh_resolution": loaded.mesh_resolution,
         "triangles": scene.num_triangles,
-        "projections": {"batch_views": stream.batch_views, "bins_used": max(provenance["bins_used"]),
+        "projections": {"batch_views": BATCH_VIEWS, "fdk_batch_views": stream.batch_views,
+                        "bins_used": max(provenance["bins_used"]),
                         "dropped_signal_share": max(provenance["dropped_signal_share"]),
                         "starved_pixels": sum(provenance["starved_pixels"]),
                         "covered_pixels": sum(provenance["covered_pixels"]),
@@ -294,8 +296,8 @@ def _project_into(stream: FDKStream, renderer: Renderer, scanned, loaded: ScanFi
     adding = None
     try:
         with ThreadPoolExecutor(1, thread_name_prefix="xrayraster-fdk") if overlapped else _InTurn() as fdk:
-            for first in range(0, total, stream.batch_views):
-                views = list(range(first, min(first + stream.batch_views, total)))
+            for first in range(0, total, BATCH_VIEWS):
+                views = list(range(first, min(first + BATCH_VIEWS, total)))
                 with _timed(seconds, "projections"):
                     batch = renderer.project_all(scanned, loaded.spectrum, views, detector=loaded.detector,
                                                  noise=loaded.options.noise, seed=loaded.options.seed,

@@ -7,9 +7,10 @@ The algorithm and its weights are in :mod:`xrayraster.recon.fdk_weights`, the fi
 ``shaders/fdk_backproject.cl``. ``references/fdk.py`` is the same algorithm in float64
 NumPy, against which the kernels are tested.
 
-Memory: when the volume fits the device next to one batch of views, it stays there and each
-batch is filtered and backprojected as it arrives, so views can be streamed from a simulation
-without ever holding them all. Otherwise the volume is reconstructed in z-slabs that fit the
+Memory: when the volume fits the device next to one batch of views, it stays there; views are
+filtered as they arrive and backprojected once a batch of them is waiting (``batch_views``, in
+whatever sizes they came), so views can be streamed from a simulation without ever holding them
+all, and the volume is read and written once a batch. Otherwise the volume is reconstructed in z-slabs that fit the
 device next to one batch of filtered views; filtered projections stay on the device when they
 all fit, else they wait in host memory and are uploaded again for each slab. Both needs are
 estimated before any work starts, and a request that cannot fit is refused with the sizes.
@@ -157,19 +158,21 @@ class FDKStream:
         self._backproject_setup()
         self._added = np.zeros(len(self.views.scale), bool)
         self._kept = []  # (views, filtered batch on the device or in host memory) until result(), unless streamed
+        self._group = None  # (device buffer, its views so far): the batch being filtered, until it is full
         self._out = np.zeros(volume.shape, np.float32)  # zeros: the slabs on a CPU device accumulate into it
         self._slabs = [self._slab_buffer(z0) for z0 in self._slab_starts()] if self.plan.streamed else None
 
     @property
     def batch_views(self) -> int:
-        """Views per filtering and backprojection launch: feed batches of this size (or any size)."""
+        """Views per backprojection launch. Views may be added in batches of any size: each is filtered
+        as it comes, and backprojected once this many are waiting (or by :meth:`result`), so a caller
+        feeding small batches (a scan checks each for starved pixels) passes over the volume as
+        seldom as one feeding large ones."""
         return self.plan.batch
 
     def add(self, first: int, projections, input: str = "lineint") -> None:
-        """Filter and backproject views ``first … first + len(projections) − 1`` of the geometry:
+        """Filter views ``first … first + len(projections) − 1`` of the geometry (backprojected by :attr:`batch_views`):
         ``projections`` (views, rows, cols) are line integrals (or ``input="transmission"``)."""
-        import pyopencl as cl
-
         n = len(self._added)
         count = len(projections) if np.ndim(projections) == 3 else 0
         if isinstance(first, bool) or not isinstance(first, (int, np.integer)) or not 0 <= first < n:
@@ -180,20 +183,17 @@ class FDKStream:
         if self._added[first : first + count].any():
             raise ReconstructionError(
                 f"views {first}…{first + count - 1}: some were added already; add each view once")
-        for start in range(0, count, self.plan.batch):
-            batch = range(first + start, first + min(start + self.plan.batch, count))
-            filtered = self._filter(batch, stack[start : start + len(batch)])
-            if self.plan.streamed:
-                for z0, slab in zip(self._slab_starts(), self._slabs):
-                    self._backproject(batch, filtered, slab, z0)
-                filtered.release()
-            elif self.plan.resident:
-                self._kept.append((batch, filtered))
-            else:
-                host = np.empty(len(batch) * self._view_bytes // 4, np.float32)
-                cl.enqueue_copy(self.ctx.queue, host, filtered)
-                filtered.release()
-                self._kept.append((batch, host))
+        start = 0
+        while start < count:
+            if self._group is None:
+                self._group = (self.ctx.buffer(self.plan.batch * self._view_bytes + WINDOW_PAD), [])
+            buffer, views = self._group
+            batch = range(first + start, first + min(start + self.plan.batch - len(views), count))
+            self._filter(batch, stack[start : start + len(batch)], buffer, len(views) * self._view_bytes)
+            views.extend(batch)
+            start += len(batch)
+            if len(views) == self.plan.batch:
+                self._close_group()
         self._added[first : first + count] = True
         # Wait for the kernels: the caller's next batch then starts on free cores (a CPU device shares
         # them with the renderer), and the time add() takes is the reconstruction's own.
@@ -207,6 +207,8 @@ class FDKStream:
         if len(missing):
             raise ReconstructionError(f"{len(missing)} view(s) not added yet (first: {missing[0]}); "
                                       "add every view before asking for the result")
+        if self._group is not None:
+            self._close_group()
         nz = self.volume.shape[0]
         for number, z0 in enumerate(self._slab_starts()):
             slab = self._slabs[number] if self.plan.streamed else self._slab_buffer(z0)
@@ -233,8 +235,9 @@ class FDKStream:
 
     def release(self) -> None:
         """Free the device buffers (and the context, if this stream made it)."""
-        for buffer in self._slabs or ():
+        for buffer in (self._slabs or []) + ([self._group[0]] if self._group is not None else []):
             buffer.release()
+        self._group = None
         for _, filtered in self._kept:
             if self.plan.resident:
                 filtered.release()
@@ -249,6 +252,27 @@ class FDKStream:
     def __exit__(self, *exc) -> None:
         if self.ctx is not None:
             self.release()
+
+    def _close_group(self) -> None:
+        """The filtered batch being gathered, backprojected (streamed) or kept until :meth:`result`."""
+        import pyopencl as cl
+
+        buffer, views = self._group
+        self._group = None
+        views = np.asarray(views)
+        size = len(views) * self._view_bytes
+        cl.enqueue_fill_buffer(self.ctx.queue, buffer, np.float32(0), size, WINDOW_PAD)  # read past the last column
+        if self.plan.streamed:
+            for z0, slab in zip(self._slab_starts(), self._slabs):
+                self._backproject(views, buffer, slab, z0)
+            buffer.release()
+        elif self.plan.resident:
+            self._kept.append((views, buffer))
+        else:
+            host = np.empty(size // 4, np.float32)
+            cl.enqueue_copy(self.ctx.queue, host, buffer)  # its views alone
+            buffer.release()
+            self._kept.append((views, host))
 
     # -- stage 1: pre-weight and ramp-filter every row of a batch --------------------------------
 
@@ -282,8 +306,9 @@ class FDKStream:
         self._local_size = int(min(self.ctx.info.max_work_group, n // 2, 256))
         self._local_scratch = cl.LocalMemory(n * 8)
 
-    def _filter(self, batch: range, raw: np.ndarray):
-        """One device buffer of the batch's filtered views, (views, rows + 2, filtered_cols + 2) float32."""
+    def _filter(self, batch: range, raw: np.ndarray, out=None, offset: int = 0):
+        """The batch's filtered views, (views, rows + 2, filtered_cols + 2) float32, written into the
+        device buffer ``out`` from byte ``offset``; without ``out``, into a new buffer, returned."""
         import pyopencl as cl
 
         ctx, n, count = self.ctx, self._n_fft, len(batch)
@@ -297,7 +322,6 @@ class FDKStream:
         self._row_ends[1] += 2 * ends.size
         # The pad lets backproject_windowed read its row window past the last column.
         size = count * self._view_bytes
-        out_dev = ctx.buffer(size + WINDOW_PAD)
         pad = self._pad if self._extended else 0
         if self._host_filter:
             views = self.views
@@ -305,9 +329,12 @@ class FDKStream:
                                     views.redundancy[batch.start : batch.stop], ends, self._response_host, views.lead,
                                     views.filtered_cols, pad, views.beam == "cone", "COLUMN_MAJOR" in self._layout,
                                     self._widths[batch.start : batch.stop], self._threads)
-            cl.enqueue_copy(ctx.queue, out_dev, host)  # the views with their rings of zeros
-            cl.enqueue_fill_buffer(ctx.queue, out_dev, np.float32(0), size, WINDOW_PAD)
-            return out_dev
+            if out is None:
+                out = ctx.buffer(size + WINDOW_PAD)
+                cl.enqueue_fill_buffer(ctx.queue, out, np.float32(0), size, WINDOW_PAD)
+            cl.enqueue_copy(ctx.queue, out, host, dst_offset=offset)  # the views with their rings of zeros
+            return out
+        out_dev = ctx.buffer(size + WINDOW_PAD)
         cl.enqueue_fill_buffer(ctx.queue, out_dev, np.float32(0), 0, size + WINDOW_PAD)
         raw_dev = ctx.buffer(raw, "r")
         part = slice(batch.start, batch.stop)
@@ -322,7 +349,11 @@ class FDKStream:
                             np.int32(self.views.beam == "cone"))
         for buffer in (raw_dev, red_dev, geo_dev, extension_dev) + ((scratch,) if self.plan.global_scratch else ()):
             buffer.release()  # after the kernel: OpenCL keeps them alive until it has run
-        return out_dev
+        if out is None:
+            return out_dev
+        cl.enqueue_copy(ctx.queue, out, out_dev, dst_offset=offset, byte_count=size)
+        out_dev.release()
+        return out
 
     # -- stage 2: a batch's filtered views into the voxels of one z-slab -------------------------
 
@@ -373,16 +404,18 @@ class FDKStream:
         cl.enqueue_fill_buffer(self.ctx.queue, slab, np.float32(0), 0, depth * self._plane)
         return slab
 
-    def _backproject(self, batch: range, filtered, slab, z0: int) -> None:
+    def _backproject(self, batch, filtered, slab, z0: int) -> None:
+        """The filtered views of ``batch`` (view indices, in the order ``filtered`` holds them) into one slab."""
         rows, cols = self.views.detector_shape[0], self.views.filtered_cols
         nz, ny, nx = self.volume.shape
         depth = min(self.plan.slab, nz - z0)
-        matrices = self.views.matrices[batch.start : batch.stop].copy()
+        batch = np.asarray(batch)
+        matrices = self.views.matrices[batch]
         matrices[:, :, 3] += z0 * matrices[:, :, 2]  # slab-local k
         matrices[:, 0] += self.views.lead * matrices[:, 2]  # column of the filtered row: virtual ones first
         # backproject_columns projects in double (its setup per voxel column and view), the others in float
         m_dev = self.ctx.buffer(matrices.reshape(-1, 12).astype(np.float64 if self._columns else np.float32), "r")
-        s_dev = self.ctx.buffer(self.views.scale[batch.start : batch.stop].astype(np.float32), "r")
+        s_dev = self.ctx.buffer(self.views.scale[batch].astype(np.float32), "r")
         if self._columns:  # a work-item per COLUMN_TILE columns along x
             size = (-(-nx // COLUMN_TILE), _round_up(ny, self._tile[1]), -(-depth // self._zchunk))
         else:
