@@ -277,15 +277,19 @@ def normalise(raw: np.ndarray, flat, dark, floor) -> Normalised:
     they are set to ``floor`` (a small positive signal, e.g. half a mean photon), counted, and
     the count returned, so a caller can report it.
     """
-    flat = np.asarray(flat, dtype=np.float64)
-    if np.any(flat - dark <= 0):
+    open_beam = np.asarray(flat, dtype=np.float64) - dark
+    if np.any(open_beam <= 0):
         raise PhysicsError("the flat field is not above the dark level: no photons reach the detector; "
                            "raise the exposure (mas) or lower the dark offset")
-    signal = np.asarray(raw, dtype=np.float64) - dark
-    starved = signal <= 0
-    signal = np.where(starved, floor, signal)
-    transmission = signal / (flat - dark)
-    return Normalised(raw=raw, transmission=transmission, line_integral=-np.log(transmission), starved=int(starved.sum()),
+    # In place on new arrays: a 512² view's normalisation in half the passes over memory, the same bytes.
+    transmission = np.asarray(raw, dtype=np.float64) - dark
+    starved = transmission <= 0
+    if starved.any():
+        transmission[starved] = floor
+    transmission /= open_beam
+    line_integral = np.log(transmission)
+    np.negative(line_integral, out=line_integral)
+    return Normalised(raw=raw, transmission=transmission, line_integral=line_integral, starved=int(starved.sum()),
                       starved_mask=starved)
 
 

@@ -15,8 +15,9 @@ from ..core.errors import RenderError
 from ..core.estimate import plan
 from ..core.projections import Projections
 from ..gl.pathlengths import PathLengthRenderer
-from ..physics.beer_lambert import pixel_photon_factor, thread_count
+from ..physics.beer_lambert import thread_count
 from ..physics.detector import NEGLIGIBLE_BLUR_PX, Detector, blur_change_bound, negligible_blur
+from ..physics.photon_factors import PhotonFactors
 from ..physics.radiograph import Radiograph, SpectralModel, flat_noise, radiograph, spectral_model
 from ..physics.realism import FLAT_TAG, GAIN_TAG, Realism, calibration_rng, focal_sigma_px, gain_map
 from ..physics.scatter import ScatterModel, detector_layout, scatter_model
@@ -41,6 +42,7 @@ class Renderer(PathLengthRenderer):
         self.last_seconds: dict[str, float] = {}  # the last project()'s GL path lengths and CPU physics, s
         self._skips_logged: set = set()  # the negligible options already logged for this scan: see _log_skip
         super().__init__(geometry, **options)
+        self.photon_factors = PhotonFactors(self.vector_geometry)  # each view's, once per relative pose
         self.physics_workers = physics_workers(self.gl.software, self.threads)
 
     def project(self, scene: Scene, spectrum, view: int = 0, *, detector: Detector | None = None,
@@ -93,7 +95,7 @@ class Renderer(PathLengthRenderer):
         def physics(view: int, lengths: np.ndarray) -> Radiograph:
             view %= views
             rng = np.random.default_rng([int(seed), view]) if noise else None
-            return radiograph(lengths, materials, spectrum, detector, pixel_photon_factor(self.vector_geometry, view),
+            return radiograph(lengths, materials, spectrum, detector, self.photon_factors(view),
                               output=output, noise=noise, rng=rng, threads=threads,
                               focal_sigma_px=self._focal_sigma_px(realism, view), gain=gain, flat_noise=flat,
                               model=model, scatter=scatter)
@@ -103,6 +105,7 @@ class Renderer(PathLengthRenderer):
     def retarget(self, geometry) -> None:
         """:meth:`PathLengthRenderer.retarget`; the scan's flats and gain map are drawn anew for it."""
         super().retarget(geometry)
+        self.photon_factors = PhotonFactors(self.vector_geometry)
         self._calibration = None
         self._skips_logged.clear()  # a new scan: its negligible options are logged again
 
@@ -163,7 +166,7 @@ class Renderer(PathLengthRenderer):
             if realism.gain_variation:
                 gain = gain_map(realism.gain_variation, shape, calibration_rng(seed, GAIN_TAG))
             if realism.flat_fields is not None:
-                flat = flat_noise(spectrum, detector, pixel_photon_factor(self.vector_geometry, 0), shape,
+                flat = flat_noise(spectrum, detector, self.photon_factors(0), shape,
                                   realism.flat_fields, calibration_rng(seed, FLAT_TAG),
                                   focal_sigma_px=self._focal_sigma_px(realism, 0), threads=self.threads)
             self._calibration = (key, gain, flat)
