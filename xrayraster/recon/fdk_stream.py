@@ -10,8 +10,8 @@ NumPy, against which the kernels are tested.
 Memory: when the volume fits the device next to one batch of views, it stays there; views are
 filtered as they arrive and backprojected once a batch of them is waiting (``batch_views``, in
 whatever sizes they came), so views can be streamed from a simulation without ever holding them
-all, and the volume is read and written once a batch. Otherwise the volume is reconstructed in z-slabs that fit the
-device next to one batch of filtered views; filtered projections stay on the device when they
+all, and the volume is read and written once a batch. Otherwise the volume is reconstructed in
+z-slabs that fit the device next to one batch of filtered views; filtered projections stay on the device when they
 all fit, else they wait in host memory and are uploaded again for each slab. Both needs are
 estimated before any work starts, and a request that cannot fit is refused with the sizes.
 """
@@ -171,8 +171,9 @@ class FDKStream:
         return self.plan.batch
 
     def add(self, first: int, projections, input: str = "lineint") -> None:
-        """Filter views ``first … first + len(projections) − 1`` of the geometry (backprojected by :attr:`batch_views`):
-        ``projections`` (views, rows, cols) are line integrals (or ``input="transmission"``)."""
+        """Filter views ``first … first + len(projections) − 1`` of the geometry, to be backprojected
+        :attr:`batch_views` at a time: ``projections`` (views, rows, cols) are line integrals (or
+        ``input="transmission"``)."""
         n = len(self._added)
         count = len(projections) if np.ndim(projections) == 3 else 0
         if isinstance(first, bool) or not isinstance(first, (int, np.integer)) or not 0 <= first < n:
@@ -351,6 +352,8 @@ class FDKStream:
             buffer.release()  # after the kernel: OpenCL keeps them alive until it has run
         if out is None:
             return out_dev
+        # The kernel writes from a buffer's start: into the gathered batch by a device-side copy
+        # (a GPU's, where this path runs, copies a 512² batch of 32 views in well under a millisecond).
         cl.enqueue_copy(ctx.queue, out, out_dev, dst_offset=offset, byte_count=size)
         out_dev.release()
         return out
