@@ -9,7 +9,10 @@ out/bench_fdk_cache/):
   tenth of the time);
 * ``twin``: examples/twin.toml's geometry (512³ voxels of 57.8 µm from views of 512², source 60 mm
   from the axis, detector 140 mm, voxel = magnified pixel), 64 views fed in batches of 32 as
-  ``xrayraster scan`` feeds them.
+  ``xrayraster scan`` feeds them;
+* ``twin32`` and ``twin128`` (not run by default): the twin's geometry with 128 views in passes of
+  32 (as ``xrayraster scan`` backprojected them until 2026-11-28) and of 128 (as it now does at
+  512²: each pass reads and writes the whole volume).
 
 Each run is a fresh process that imports xrayraster (and its kernels) either from this checkout or
 from the baseline's files (``git archive BASE xrayraster shaders references`` into a temporary
@@ -28,6 +31,7 @@ Usage::
 
     python -m scripts.bench_backproject                  # 256, 512 and twin, 3 rounds (~6 min on 2 cores)
     python -m scripts.bench_backproject --cases 256 --rounds 1
+    python -m scripts.bench_backproject --cases twin32 twin128 --rounds 2 --no-reference
     python -m scripts.bench_backproject --base edb156a   # the baseline commit (default)
 
 Writes out/bench_backproject.json.
@@ -46,7 +50,9 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 # name -> (voxels a side, views, views per batch (None: the stream's own), geometry)
-CASES = {"256": (256, 360, None, "bench_fdk"), "512": (512, 64, None, "bench_fdk"), "twin": (512, 64, 32, "twin")}
+CASES = {"256": (256, 360, None, "bench_fdk"), "512": (512, 64, None, "bench_fdk"), "twin": (512, 64, 32, "twin"),
+         "twin32": (512, 128, 32, "twin"), "twin128": (512, 128, 128, "twin")}
+DEFAULT_CASES = ("256", "512", "twin")
 MU = 0.05  # mm⁻¹, the phantom's skull
 
 _CLOCK_C = r"""
@@ -119,6 +125,12 @@ def case_geometry(name: str):
             xr.VolumeGeometry((n, n, n), voxel), 12.0)
 
 
+def projections_cache(name: str) -> Path:
+    """The file of case ``name``'s projected phantom (the twin's cases share theirs by view count)."""
+    _, views, _, kind = CASES[name]
+    return ROOT / "out" / "bench_fdk_cache" / f"shepp_logan_{'twin' if kind == 'twin' else name}_{views}views.npy"
+
+
 def worker(name: str, passes: int, save: Path | None) -> dict:
     """One process: the xrayraster first on sys.path backprojects case ``name`` ``passes`` times."""
     import numpy as np
@@ -133,7 +145,7 @@ def worker(name: str, passes: int, save: Path | None) -> dict:
     opencl.read_shader = lambda source: (shaders / source).read_text()
     g, vol, radius = case_geometry(name)
     n, views, batch, _ = CASES[name]
-    cache = ROOT / "out" / "bench_fdk_cache" / f"shepp_logan_{name}_{views}views.npy"
+    cache = projections_cache(name)
     if cache.exists():
         p = np.load(cache)
     else:
@@ -181,8 +193,8 @@ def against_reference(name: str, volumes: dict, blocks: int = 4, half: int = 6) 
     from references.fdk import fdk_reference
 
     g, vol, _ = case_geometry(name)
-    n, views, _, _ = CASES[name]
-    p = np.load(ROOT / "out" / "bench_fdk_cache" / f"shepp_logan_{name}_{views}views.npy")
+    n = vol.shape[0]
+    p = np.load(projections_cache(name))
     first, second = volumes.values()
     span = float(np.ptp(first))
     diff = np.abs(second - first)
@@ -226,7 +238,7 @@ def _run(tree: Path, name: str, passes: int, save: Path) -> dict:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--cases", nargs="+", choices=list(CASES), default=list(CASES))
+    ap.add_argument("--cases", nargs="+", choices=list(CASES), default=list(DEFAULT_CASES))
     ap.add_argument("--rounds", type=int, default=3, help="baseline/ours alternations per case")
     ap.add_argument("--passes", type=int, default=2, help="timed backprojections per run (the best counts)")
     ap.add_argument("--base", default="edb156a", help="the baseline commit")
