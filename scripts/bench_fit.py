@@ -1,6 +1,7 @@
 """``xrayraster fit`` against scans whose values it is not told: how close it comes, and how long it takes.
 
     python -m scripts.bench_fit            # four 256³ cases (~50 min on 2 cores)
+    python -m scripts.bench_fit --cases woven   # one of them (~18 min)
     python -m scripts.bench_fit --quick    # the bundled small scan, one case (~15 s)
 
 Each case makes a "real" scan with hidden values (its own noise seed), then fits the start scan file
@@ -92,7 +93,9 @@ def case(name: str, told: dict, hidden: dict, base: Path, folder: Path) -> dict:
 
 
 def main() -> None:
-    args = outputs(parser(__doc__, "the bundled small scan, one case", plots=False).parse_args(), "bench_fit")
+    ap = parser(__doc__, "the bundled small scan, one case", plots=False)
+    ap.add_argument("--cases", nargs="+", choices=list(CASES), default=list(CASES), help="the 256³ cases to run")
+    args = outputs(ap.parse_args(), "bench_fit")
     t_start = time.perf_counter()
     command, machine = announce()
     with tempfile.TemporaryDirectory() as tmp:
@@ -103,7 +106,7 @@ def main() -> None:
             table = tomllib.loads((ROOT / "examples" / "twin.toml").read_text())
             for key, value in HALF_TWIN.items():
                 set_key(table, key, value)
-            base, cases = folder / "half_twin.toml", CASES
+            base, cases = folder / "half_twin.toml", {name: CASES[name] for name in args.cases}
             base.write_text(tomli_w.dumps(table))
         rows = []
         for name, (told, hidden) in cases.items():

@@ -3,6 +3,7 @@ intersection meshes (method "nested") against the per-pixel sort (method "resolv
 
     python -m scripts.bench_one_pass            # twin_small at 128², 256² and 512², the twin at 512² (~3 min)
     python -m scripts.bench_one_pass --quick    # twin_small at 128² and 256², 4 views (~20 s)
+    LP_NUM_THREADS=1 python -m scripts.bench_one_pass --passes   # and each GL pass apart, on one llvmpipe thread
 
 The scenes are the samples of ``examples/twin_small.toml`` (2 × 2 woven cells, the dataset
 benchmark's sample) and ``examples/twin.toml`` (the reference twin), meshed as ``xr.scan`` meshes
@@ -16,15 +17,24 @@ methods' path lengths over every pixel, material and view, and the 99.99th perce
 Beside them, the plain sum (method "sum": every object counted whole, overlaps counted twice, so
 its lengths are wrong on these scenes and not compared): the same crossing passes with nothing for
 the overlaps, the floor of any one-pass scheme on this machine.
+
+With ``--passes``, one more pass over the views per method times each GL pass apart (the driver
+finishes its work before and after each, so the sum exceeds a view's time a little): crossing
+pass 1 (``pathlength_small``), its indirect dispatch's groups, 1b (``pathlength_candidates``), 2
+(``pathlength_large``, the rasteriser) and the sort (``pathlength_resolve``), ms a view.
+``LP_NUM_THREADS=1`` gives a dataset build's worker's share of llvmpipe on two cores.
 """
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import time
+from contextlib import contextmanager
 
 import numpy as np
 
+from xrayraster.gl.context import GLContext
 from xrayraster.gl.pathlengths import PathLengthRenderer
 from xrayraster.pipeline import load_scan_file
 
@@ -39,7 +49,34 @@ CASES = {  # name: (scan file, detector pixels across)
 QUICK = ("twin_small 128²", "twin_small 256²")
 
 
-def measure(name: str, views: int) -> dict:
+@contextmanager
+def pass_timer():
+    """A dict that fills, inside the block, with the seconds of every GL pass by shader name: each
+    dispatch and draw of a :class:`GLContext` is timed between two ``finish`` calls."""
+    seconds: dict[str, float] = collections.defaultdict(float)
+    originals = {name: getattr(GLContext, name) for name in ("dispatch", "dispatch_indirect", "draw_indirect")}
+
+    def timed(original):
+        def call(gl, what, *args, **kwargs):
+            program = getattr(what, "program", what)  # a draw's vertex array: its program
+            name = next(key[0] for key, p in gl._programs.items() if p.glo == program.glo)
+            gl.ctx.finish()
+            start = time.perf_counter()
+            original(gl, what, *args, **kwargs)
+            gl.ctx.finish()
+            seconds[name.rsplit(".", 1)[0]] += time.perf_counter() - start
+        return call
+
+    try:
+        for name, original in originals.items():
+            setattr(GLContext, name, timed(original))
+        yield seconds
+    finally:
+        for name, original in originals.items():
+            setattr(GLContext, name, original)
+
+
+def measure(name: str, views: int, passes: bool = False) -> dict:
     path, pixels = CASES[name]
     loaded = load_scan_file(ROOT / "examples" / path)
     scene = loaded.with_mount(loaded.sample_scene())
@@ -64,6 +101,12 @@ def measure(name: str, views: int) -> dict:
                 start = time.perf_counter()
                 lengths[method] = np.stack([r.path_lengths(scene, int(v)) for v in picks])
                 times[method].append((time.perf_counter() - start) / views)
+        by_pass = {}
+        for method, r in renderers.items() if passes else ():
+            with pass_timer() as seconds:
+                for v in picks:
+                    r.path_lengths(scene, int(v))
+            by_pass[method] = {k: 1e3 * s / views for k, s in seconds.items()}
     finally:
         for r in renderers.values():
             r.release()
@@ -78,11 +121,15 @@ def measure(name: str, views: int) -> dict:
            "max_length_mm": float(lengths["resolve"].max())}
     row["speedup"] = row["resolve_ms"] / row["nested_ms"]
     row["floor_speedup"] = row["resolve_ms"] / row["sum_ms"]
+    if passes:
+        row["passes_ms"] = by_pass
     say(f"{name}: {row['triangles']} triangles + {row['term_triangles']} in {row['terms']} terms; overlaps "
         f"{overlaps_s:.2f} s, terms {terms_s:.3f} s; a view: nested {row['nested_ms']:.1f} ms, resolve "
         f"{row['resolve_ms']:.1f} ms ({row['speedup']:.2f}x; the plain sum, its floor: {row['sum_ms']:.1f} ms, "
         f"{row['floor_speedup']:.2f}x); max |diff| {row['max_diff_mm']:.2g} mm "
         f"(p99.99 {row['p9999_diff_mm']:.2g}) of {row['max_length_mm']:.1f} mm")
+    for method, ms in row.get("passes_ms", {}).items():
+        say(f"    {method} by pass, ms a view: " + ", ".join(f"{k} {v:.2f}" for k, v in ms.items()))
     return row
 
 
@@ -111,11 +158,13 @@ def plot(rows: list[dict], plots_dir) -> None:
 
 
 def main() -> None:
-    args = outputs(parser(__doc__, "twin_small at 128² and 256², 4 views", plots=True).parse_args(), "bench_one_pass")
+    ap = parser(__doc__, "twin_small at 128² and 256², 4 views", plots=True)
+    ap.add_argument("--passes", action="store_true", help="also time each GL pass apart")
+    args = outputs(ap.parse_args(), "bench_one_pass")
     t_start = time.perf_counter()
     command, machine = announce()
     names = QUICK if args.quick else tuple(CASES)
-    rows = [measure(name, 4 if args.quick else 12) for name in names]
+    rows = [measure(name, 4 if args.quick else 12, args.passes) for name in names]
     plot(rows, args.plots_dir)
     conclude(args.json, {"command": command, "machine": machine, "rows": rows}, machine, t_start)
 

@@ -1,11 +1,17 @@
 // Shared by the resolve passes: read one pixel's crossing list (recorded by crossing.glsl in
 // RESOLVE mode), sort it along the ray, and sweep it with the ownership rule. The lists stay in
 // place; the host empties them when the last resolve pass of a view is done.
+//
+// llvmpipe ends every loop of a shader invocation once all its loops together have run 65535
+// steps (Mesa's LP_MAX_TGSI_LOOP_ITERATIONS), silently: a pixel whose ray crosses a few hundred
+// surfaces then came out wrong when the sort took n² steps. The sort takes n log2 n, and a pass
+// reports each pixel whose last loop did not run to its end (truncated) through
+// count_truncated; the host refuses the view's result then (xrayraster/gl/crossings.py).
 
 layout(local_size_x = 8, local_size_y = 8) in;
 layout(std430, binding = BINDING_HEADS) readonly buffer Heads { uint heads[]; };
 layout(std430, binding = BINDING_NODES) readonly buffer Nodes { uvec4 nodes[]; };  // t bits, object*2 + exit, next, -
-layout(std430, binding = BINDING_COUNTERS) buffer Counters { uint overflow_pixels; uint max_depth; };
+layout(std430, binding = BINDING_COUNTERS) buffer Counters { uint overflow_pixels; uint max_depth; uint truncated_pixels; };
 
 const uint END = 0xFFFFFFFFu;
 float ts[MAX_CROSSINGS];
@@ -15,6 +21,24 @@ uint listed_metas[MAX_CROSSINGS];
 uint active_rank[MAX_CROSSINGS];
 int active_count[MAX_CROSSINGS];
 int n_active = 0;
+
+// One merge pass: the runs of `width` in SRC (n entries) merged pairwise into DST, the left
+// run's entry first on equal t. A macro: GLSL copies arrays passed to functions.
+#define MERGE_PASS(SRC_T, SRC_M, DST_T, DST_M) \
+    for (int k = 0, i = 0, j = 0, mid = 0, end = 0; k < n; k++) { \
+        if (k == end) { i = k; mid = min(k + width, n); j = mid; end = min(k + 2 * width, n); } \
+        bool left = j >= end || (i < mid && SRC_T[min(i, n - 1)] <= SRC_T[min(j, n - 1)]); \
+        int from = left ? i : j; \
+        DST_T[k] = SRC_T[from]; \
+        DST_M[k] = SRC_M[from]; \
+        if (left) i++; else j++; \
+    }
+
+// Counts a pixel whose resolve pass was cut short: `complete` is false when its last loop did not
+// run to its end (module comment).
+void count_truncated(bool complete) {
+    if (!complete) atomicAdd(truncated_pixels, 1u);
+}
 
 // The list of `pixel` into ts/metas, sorted by t; returns how many crossings it holds, or -1
 // after counting an overflow when it holds more than MAX_CROSSINGS (the host then reruns the
@@ -38,19 +62,19 @@ int load_sorted(int pixel) {
         atomicMax(max_depth, uint(depth));
         return -1;
     }
-    // Sorted by rank: each crossing's place is the number of crossings before it (ties in list
-    // order). Its inner loop reads every lane's j-th element at once, where an insertion sort's
-    // shifts stop at a different place in each SIMD lane: on llvmpipe the overlap pass took 2-9 %
-    // less time (BENCHMARKS.md).
-    for (int i = 0; i < n; i++) {
-        float t = listed_ts[i];
-        int place = 0;
-        for (int j = 0; j < n; j++) {
-            float u = listed_ts[j];
-            place += (u < t || (u == t && j < i)) ? 1 : 0;
+    // A stable bottom-up merge sort (ties stay in list order), passes alternating between the
+    // listed and the sorted arrays: ceil(log2 n) passes of n steps each.
+    bool in_listed = true;
+    for (int width = 1; width < n; width *= 2) {
+        if (in_listed) MERGE_PASS(listed_ts, listed_metas, ts, metas)
+        else MERGE_PASS(ts, metas, listed_ts, listed_metas)
+        in_listed = !in_listed;
+    }
+    if (in_listed) {
+        for (int k = 0; k < n; k++) {
+            ts[k] = listed_ts[k];
+            metas[k] = listed_metas[k];
         }
-        ts[place] = t;
-        metas[place] = listed_metas[i];
     }
     return n;
 }

@@ -24,12 +24,14 @@ void main() {
     // each crossing's t rounded once, not a float32 running sum.
     int owner = -1;
     uint previous = 0u;
-    for (int i = 0; i < n; i++) {
+    int i = 0;
+    for (; i < n; i++) {
         uint units = fixed_units(ts[i]);
         if (owner >= 0) acc[object_info(uint(owner)).x] += units - previous;
         previous = units;
         owner = sweep(i, owner);
     }
+    count_truncated(i == n);
     int npix = u_size.x * u_size.y;
     for (int c = 0; c < NUM_CHANNELS; c++) lengths[c * npix + pixel] = float(int(acc[c])) / u_fixed_scale;
 }

@@ -32,7 +32,8 @@ void main() {
     int i = 0;
     int plane = u_size.x * u_size.y;
     uint word = 0u;
-    for (int s = 0; s < u_slices; s++) {
+    int s = 0;
+    for (; s < u_slices; s++) {
         float t = u_t0 + float(s) * u_dt;
         for (; i < n && ts[i] < t; i++) owner = sweep(i, owner);
         uint label = owner < 0 ? 0u : object_info(uint(owner)).w;
@@ -43,4 +44,5 @@ void main() {
             word = 0u;
         }
     }
+    count_truncated(s == u_slices);
 }

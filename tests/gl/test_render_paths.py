@@ -9,8 +9,9 @@ import trimesh
 from references.chords import box_chord, cone_rays, convex_chord, random_rotation
 
 import xrayraster as xr
+from xrayraster.gl.crossings import MAX_SMALL_TRIANGLE_PIXELS
 
-ALL_RASTER, DEFAULT, ALL_COMPUTE = 0, None, 10**9  # None: the renderer's own split
+ALL_RASTER, DEFAULT, ALL_COMPUTE = 0, None, MAX_SMALL_TRIANGLE_PIXELS  # None: the renderer's own split
 N = 160
 
 
@@ -106,10 +107,11 @@ def test_resolve_agrees_with_sum_on_both_paths(gl):
         np.testing.assert_allclose(out, outs[0], atol=2e-5)
 
 
-def test_bad_split_is_refused(gl):
+@pytest.mark.parametrize("split", [-1, MAX_SMALL_TRIANGLE_PIXELS + 1, 2.5])
+def test_bad_split_is_refused(gl, split):
     geom = xr.ConeBeamGeometry(40.0, 100.0, (8, 8), 0.2, [0.0])
-    with pytest.raises(xr.RenderError, match="small_triangle_pixels"):
-        xr.Renderer(geom, context=gl, small_triangle_pixels=-1)
+    with pytest.raises(xr.RenderError, match="small_triangle_pixels must be an integer from 0 to 16384"):
+        xr.Renderer(geom, context=gl, small_triangle_pixels=split)
 
 
 def test_triangle_pass_spans_two_dispatch_dimensions(gl):

@@ -173,3 +173,48 @@ def test_object_close_to_the_source(render):
     got = render(geom, scene)[0]
     exact = box_chord(*cone_rays(50.0, 100.0, (64, 64), 0.5, 0.0), np.array([0, -48.5, 0]), np.eye(3), (1, 0.5, 1))
     assert np.abs(got - exact).max() <= 1e-4
+
+
+def _row_of_cubes(count: int, axis: np.ndarray, rotation: np.ndarray, pitch: float = 0.6, size: float = 0.5):
+    """``count`` disjoint cubes (``size`` mm, turned by ``rotation``) every ``pitch`` mm along the unit
+    vector ``axis``, centred on the origin: a scene of two objects taking the cubes in turn, and the
+    cubes' centres by object."""
+    centres = np.outer(np.arange(count) - (count - 1) / 2, axis) * pitch
+    scene, by_object = xr.Scene(), []
+    for first, material in enumerate(("weft", "matrix")):
+        cubes = []
+        for c in centres[first::2]:
+            m = np.eye(4)
+            m[:3, :3], m[:3, 3] = rotation, c
+            cubes.append(trimesh.creation.box((size,) * 3, transform=m))
+        scene.add(trimesh.util.concatenate(cubes), material, name=material)
+        by_object.append(centres[first::2])
+    return scene, by_object
+
+
+@pytest.mark.parametrize("overlap", ["resolve", "sum"])
+def test_rays_through_hundreds_of_surfaces(render, overlap):
+    """200 cubes in a row along a parallel beam: 400 crossings a ray. The per-pixel sort took n² loop
+    steps, and llvmpipe ends a shader invocation's loops after 65535 in all (Mesa's
+    LP_MAX_TGSI_LOOP_ITERATIONS): these rays came out 35-75 mm short before the sort took n log n."""
+    theta = 0.3
+    rotation = np.array([[np.cos(theta), -np.sin(theta), 0.0], [np.sin(theta), np.cos(theta), 0.0], [0.0, 0.0, 1.0]])
+    origins, dirs = parallel_rays((12, 12), 0.09, theta)  # no ray along a face plane (±0.25 mm)
+    scene, by_object = _row_of_cubes(200, dirs[0, 0], rotation)
+    got = render(xr.ParallelBeamGeometry((12, 12), 0.09, [theta]), scene, overlap=overlap)
+    for channel, centres in enumerate(by_object):
+        exact = sum(box_chord(origins, dirs, c, rotation, (0.25,) * 3) for c in centres)
+        assert exact.max() == pytest.approx(50.0)  # the central rays cross all 100 of the object's cubes
+        assert np.abs(got[channel] - exact).max() <= 1e-4
+
+
+def test_rays_whose_sort_llvmpipe_would_cut_short_are_refused(gl):
+    """Past what llvmpipe sorts in one invocation (about 3500 crossings a ray) the view is refused,
+    naming the fix, instead of coming out wrong; a GPU's driver sorts them."""
+    if not gl.software:
+        pytest.skip(f"{gl.renderer} has no limit on a shader's loop steps")
+    rotation = np.eye(3)
+    scene, _ = _row_of_cubes(2000, np.array([0.0, 1.0, 0.0]), rotation)
+    with pytest.raises(xr.RenderError, match="65535 steps.*overlap='sum' or 'nested'.*method='stencil'"):
+        with xr.Renderer(xr.ParallelBeamGeometry((4, 4), 0.1, [0.0]), context=gl, overlap="resolve") as r:
+            r.path_lengths(scene, 0)

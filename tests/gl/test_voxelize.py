@@ -295,3 +295,21 @@ def test_columns_with_more_crossings_than_the_first_pass_holds(gl):
     want = np.where((plate >= 0) & (plate < 12) & (np.abs(z - (plate - 5.5)) < 0.25), plate + 1, 0)
     assert np.array_equal(labels[:, 1, 1], want) and np.array_equal(labels[:, 2, 2], want)
     assert set(np.unique(want)) == set(range(13))
+
+
+def test_columns_through_hundreds_of_surfaces(gl):
+    """200 cubes stacked along z, two objects taking them in turn: 400 crossings a voxel column,
+    past the 65535 loop steps llvmpipe allows a shader invocation when the sort took n² of them."""
+    count, pitch, half = 200, 0.6, 0.25
+    centres = (np.arange(count) - (count - 1) / 2) * pitch
+    scene = xr.Scene()
+    for first, label in ((0, 3), (1, 7)):
+        cubes = [trimesh.creation.box((2 * half,) * 3, transform=xr.Transform.translation((0, 0, z)).matrix)
+                 for z in centres[first::2]]
+        scene.add(trimesh.util.concatenate(cubes), f"m{label}", label=label)
+    volume = xr.VolumeGeometry((600, 4, 4), (0.2, 0.1, 0.1))  # centres 0.05 mm or more from every face
+    z = volume.axis_centres(0)
+    nearest = np.abs(z[:, None] - centres[None, :]).argmin(axis=1)
+    want = np.where(np.abs(z - centres[nearest]) < half, np.where(nearest % 2, 7, 3), 0)
+    got = voxelize(scene, volume, context=gl).data
+    assert np.array_equal(got, np.broadcast_to(want[:, None, None], volume.shape).astype(got.dtype))

@@ -25,7 +25,7 @@ BINDINGS = {
     "accumulators": 4,  # fixed-point sums (channel, row, col); sum passes only
     "heads": 4,  # per-pixel list heads; overlap passes only
     "nodes": 5,  # crossing-list nodes
-    "counters": 6,  # a resolve pass's overflowing pixels and deepest list
+    "counters": 6,  # a resolve pass's overflowing pixels, deepest list and pixels cut short
     "large_corners": 7,  # window-space corners of the large triangles
 }
 

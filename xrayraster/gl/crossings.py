@@ -55,6 +55,9 @@ ENTRY_BYTES = 16  # a candidate entry: a triangle and up to two of its pixels (s
 # Measured: 32-128 equally fast on llvmpipe at 256²-2048²; on an NVIDIA H200, a twin view at 512² took
 # 6.8-7.7 ms with 64 against 12.5-18.8 with every triangle rasterised (0), the same bytes.
 SMALL_TRIANGLE_PIXELS = 64
+# Pass 1 takes at most three steps a pixel of a triangle's box (its rows twice, its pixels once),
+# within the 65535 loop steps llvmpipe allows a shader invocation (shaders/crossing_lists.glsl).
+MAX_SMALL_TRIANGLE_PIXELS = 16384
 
 
 class CrossingEngine:
@@ -267,9 +270,10 @@ class CrossingEngine:
     def _resolve(self, uploaded: UploadedScene, shader: str, defines: dict, uniforms: dict, outputs: dict) -> None:
         """The one overflow loop: run compute pass ``shader`` over the pixels with room for
         MAX_CROSSINGS crossings a pixel; where a list holds more, the pass counts an overflow and
-        skips the pixel, and it runs again with room for the deepest list (kept for later views)."""
+        skips the pixel, and it runs again with room for the deepest list (kept for later views).
+        RenderError when the driver cut a pixel's loops short (``shaders/crossing_lists.glsl``)."""
         rows, cols = self.shape
-        counters = self.scratch("counters", 8)
+        counters = self.scratch("counters", 12)
         while True:
             prog = self.gl.compute(shader, {**defines, "MAX_CROSSINGS": self.max_crossings})
             self.gl.set_uniforms(prog, uniforms)
@@ -279,10 +283,17 @@ class CrossingEngine:
             counters.bind_to_storage_buffer(BINDINGS["counters"])
             for name, buffer in outputs.items():
                 buffer.bind_to_storage_buffer(BINDINGS[name])
-            counters.write(bytes(8))
+            counters.write(bytes(12))
             self.gl.dispatch(prog, (cols + 7) // 8, (rows + 7) // 8, 1)
             self.gl.barrier()
-            overflow, depth = self.gl.read(counters, np.uint32, 2)
+            overflow, depth, truncated = self.gl.read(counters, np.uint32, 3)
+            if truncated and not overflow:
+                raise RenderError(
+                    f"{shader}: the rays of {truncated} pixels cross up to {self.max_crossings} surfaces, more than "
+                    f"this GL driver ({self.gl.ctx.info['GL_RENDERER']}) sorts in one shader invocation (llvmpipe "
+                    "stops an invocation's loops after 65535 steps in all), so their results would be wrong. Use a "
+                    "GPU's driver, or passes without the per-pixel sort: path lengths with overlap='sum' or 'nested' "
+                    "where no objects overlap partly, labels with method='stencil'")
             if not overflow:
                 return
             self.max_crossings = int(2 ** np.ceil(np.log2(depth)))

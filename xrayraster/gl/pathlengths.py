@@ -35,7 +35,7 @@ from ..core.geometry import VectorGeometry, as_vector_geometry
 from ..core.memory import available_memory
 from ..scene.scene import Scene
 from .context import GLContext
-from .crossings import MIN_CROSSINGS, NODE_BYTES, SMALL_TRIANGLE_PIXELS, CrossingEngine
+from .crossings import MAX_SMALL_TRIANGLE_PIXELS, MIN_CROSSINGS, NODE_BYTES, SMALL_TRIANGLE_PIXELS, CrossingEngine
 from .scene_upload import UploadedScene
 
 log = logging.getLogger("xrayraster")
@@ -63,7 +63,8 @@ class PathLengthRenderer:
 
     ``small_triangle_pixels``: a triangle whose pixel box holds at most this many pixel centres
     is tested pixel by pixel in a compute pass; larger ones go through the rasteriser. It only
-    moves work between two exact paths (the result is the same); 0 rasterises everything. The
+    moves work between two exact paths (the result is the same); 0 rasterises everything, and at
+    most :data:`~xrayraster.gl.crossings.MAX_SMALL_TRIANGLE_PIXELS` (16384) may be asked. The
     default, :data:`~xrayraster.gl.crossings.SMALL_TRIANGLE_PIXELS` (64), was the faster on llvmpipe
     and on an NVIDIA H200 alike.
     """
@@ -82,8 +83,10 @@ class PathLengthRenderer:
         if int(supersampling) != supersampling or supersampling < 1:
             raise RenderError(f"supersampling must be a positive integer, got {supersampling!r}")
         check_choice(overlap, OVERLAP_MODES, "overlap", RenderError)
-        if int(small_triangle_pixels) != small_triangle_pixels or small_triangle_pixels < 0:
-            raise RenderError(f"small_triangle_pixels must be an integer >= 0, got {small_triangle_pixels!r}")
+        if (int(small_triangle_pixels) != small_triangle_pixels
+                or not 0 <= small_triangle_pixels <= MAX_SMALL_TRIANGLE_PIXELS):
+            raise RenderError(f"small_triangle_pixels must be an integer from 0 to {MAX_SMALL_TRIANGLE_PIXELS} (a "
+                              f"larger box would outrun llvmpipe's loop limit), got {small_triangle_pixels!r}")
         self.supersampling = int(supersampling)
         self.overlap = overlap
         self._render_vec = _refine(self.vector_geometry, self.supersampling)
