@@ -23,7 +23,8 @@ int active_count[MAX_CROSSINGS];
 int n_active = 0;
 
 // One merge pass: the runs of `width` in SRC (n entries) merged pairwise into DST, the left
-// run's entry first on equal t. A macro: GLSL copies arrays passed to functions.
+// run's entry first on equal t. A macro: GLSL copies arrays passed to functions. The reads are
+// clamped because a SIMD driver may evaluate both sides of || and && for every lane.
 #define MERGE_PASS(SRC_T, SRC_M, DST_T, DST_M) \
     for (int k = 0, i = 0, j = 0, mid = 0, end = 0; k < n; k++) { \
         if (k == end) { i = k; mid = min(k + width, n); j = mid; end = min(k + 2 * width, n); } \

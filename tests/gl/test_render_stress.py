@@ -213,8 +213,7 @@ def test_rays_whose_sort_llvmpipe_would_cut_short_are_refused(gl):
     naming the fix, instead of coming out wrong; a GPU's driver sorts them."""
     if not gl.software:
         pytest.skip(f"{gl.renderer} has no limit on a shader's loop steps")
-    rotation = np.eye(3)
-    scene, _ = _row_of_cubes(2000, np.array([0.0, 1.0, 0.0]), rotation)
+    scene, _ = _row_of_cubes(2000, np.array([0.0, 1.0, 0.0]), np.eye(3))
     with pytest.raises(xr.RenderError, match="65535 steps.*overlap='sum' or 'nested'.*method='stencil'"):
         with xr.Renderer(xr.ParallelBeamGeometry((4, 4), 0.1, [0.0]), context=gl, overlap="resolve") as r:
             r.path_lengths(scene, 0)
